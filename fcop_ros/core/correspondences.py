@@ -1,0 +1,232 @@
+"""Per-instance correspondences (x, d, p) from depth, NOCS and instance-mask images.
+
+Conventions and choices:
+- ``depth``: (H,W) z-depth in metres; NaN, inf and values <= 0 are invalid.
+- ``nocs``: (H,W,3) in [0,1]; an all-zero pixel means "no prediction"; non-finite or far
+  outside [0,1] (beyond ``nocs_tolerance``) is invalid.
+- ``mask``: (H,W) integer; 0 (and negatives) is background, every other value one instance.
+- Image points x are pixel centres on integer coordinates, relative to the principal point,
+  which defaults to ((W-1)/2, (H-1)/2).
+- Edge pixels: each instance mask is eroded by ``erode_px`` pixels first, because learned
+  depth and NOCS bleed across object boundaries.
+- Tiny instances: fewer than ``min_object_pixels`` usable pixels after erosion are skipped.
+- Noisy pixels: a pixel whose depth or NOCS differs from the robust local mean of its own
+  instance by more than ``outlier_sigma`` robust sigmas is dropped; with ``denoise_radius`` > 0
+  depth and NOCS are replaced by their local mean over the instance's valid pixels in a
+  (2r+1)^2 window (noise is estimated from second differences, which ignore planar slopes).
+- Large instances are randomly subsampled to ``max_pixels`` to bound the cost.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+_MAD = 1.4826
+
+
+@dataclass
+class Instance:
+    """Correspondences of one instance.
+
+    instance_id: mask value; x (n,2) px relative to the principal point; d (n,) metres; p (n,3)
+    NOCS in [0,1]; var_d (n,) estimated noise variance of d (m^2) after denoising; sigma_d and
+    sigma_p: estimated per-pixel noise of the raw depth (m) and NOCS; mask_pixels: pixels of
+    the instance in the mask; valid_pixels: usable pixels before subsampling.
+    """
+
+    instance_id: int
+    x: np.ndarray
+    d: np.ndarray
+    p: np.ndarray
+    var_d: np.ndarray
+    sigma_d: float
+    sigma_p: float
+    mask_pixels: int
+    valid_pixels: int
+
+
+def check_images(depth, nocs, mask):
+    """Validate shapes and types; return float64 depth, float64 nocs and integer mask.
+
+    Raises ValueError with a message naming the offending input."""
+    depth = np.asarray(depth)
+    nocs = np.asarray(nocs)
+    mask = np.asarray(mask)
+    if depth.ndim != 2:
+        raise ValueError(f"depth must be an (H,W) image, got shape {depth.shape}")
+    if nocs.ndim != 3 or nocs.shape[2] != 3:
+        raise ValueError(f"nocs must be an (H,W,3) image, got shape {nocs.shape}")
+    if mask.ndim != 2:
+        raise ValueError(f"mask must be an (H,W) image, got shape {mask.shape}")
+    if not (depth.shape == nocs.shape[:2] == mask.shape):
+        raise ValueError(f"image sizes differ: depth {depth.shape}, nocs {nocs.shape[:2]}, mask {mask.shape}")
+    if not (np.issubdtype(depth.dtype, np.floating) or np.issubdtype(depth.dtype, np.integer)):
+        raise ValueError(f"depth must be numeric, got dtype {depth.dtype}")
+    if not (np.issubdtype(nocs.dtype, np.floating) or np.issubdtype(nocs.dtype, np.integer)):
+        raise ValueError(f"nocs must be numeric, got dtype {nocs.dtype}")
+    if mask.dtype == bool:
+        mask = mask.astype(np.int32)
+    if not np.issubdtype(mask.dtype, np.integer):
+        raise ValueError(f"mask must hold integer instance ids, got dtype {mask.dtype}")
+    return depth, nocs, mask
+
+
+def instance_ids(mask: np.ndarray, min_pixels: int = 1):
+    """Positive instance ids with at least ``min_pixels`` pixels, and their pixel counts."""
+    flat = mask.ravel()
+    top = int(flat.max()) if flat.size else 0
+    if top <= 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    if top <= 1 << 20:
+        counts = np.bincount(np.clip(flat, 0, None).astype(np.int64), minlength=top + 1)
+        ids = np.flatnonzero(counts)
+        ids = ids[ids > 0]
+        counts = counts[ids]
+    else:
+        ids, counts = np.unique(flat[flat > 0], return_counts=True)
+    keep = counts >= max(min_pixels, 1)
+    return ids[keep].astype(np.int64), counts[keep].astype(np.int64)
+
+
+def _bounding_boxes(mask: np.ndarray, ids: np.ndarray):
+    """(row0, row1, col0, col1) half-open bounding box of each id, in one pass over the image."""
+    if ids.max() <= 1 << 16:
+        lab = mask if mask.dtype.kind in "iu" and mask.dtype.itemsize <= 4 else mask.astype(np.int64)
+        objs = ndimage.find_objects(np.where(lab > 0, lab, 0), max_label=int(ids.max()))
+        return [(objs[i - 1][0].start, objs[i - 1][0].stop, objs[i - 1][1].start, objs[i - 1][1].stop)
+                for i in ids]
+    boxes = []
+    for iid in ids:
+        r = np.flatnonzero((mask == iid).any(1))
+        c = np.flatnonzero((mask == iid).any(0))
+        boxes.append((r[0], r[-1] + 1, c[0], c[-1] + 1))
+    return boxes
+
+
+def _second_diff_sigma(img: np.ndarray, ok: np.ndarray) -> float:
+    """Robust per-pixel noise sigma from horizontal and vertical second differences."""
+    vals = []
+    for a, okv in ((img[::3], ok[::3]), (img[:, ::3].T, ok[:, ::3].T)):
+        dd = a[:, :-2] - 2 * a[:, 1:-1] + a[:, 2:]
+        m = okv[:, :-2] & okv[:, 1:-1] & okv[:, 2:]
+        vals.append(dd[m].ravel())
+    v = np.concatenate(vals)
+    if v.size < 8:
+        return 0.0
+    v = _thin(v)
+    return float(_MAD * np.median(np.abs(v - np.median(v))) / np.sqrt(6.0))
+
+
+def _thin(v: np.ndarray, n: int = 2048) -> np.ndarray:
+    """A strided subset of about n values: robust scales need no more, and medians are costly."""
+    return v[:: v.size // n] if v.size > 2 * n else v
+
+
+def _local_mean(img: np.ndarray, w: np.ndarray, radius: int):
+    """Mean of ``img`` over the pixels with w=1 in a (2r+1)^2 box; also the count."""
+    k = (2 * radius + 1, 2 * radius + 1)
+    wf = w.astype(np.float32)
+    cnt = cv2.boxFilter(wf, -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    if img.ndim == 2:
+        num = cv2.boxFilter((img * wf).astype(np.float32), -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
+        mean = num / np.maximum(cnt, 1e-6)
+    else:
+        num = cv2.boxFilter((img * wf[..., None]).astype(np.float32), -1, k, normalize=False,
+                            borderType=cv2.BORDER_CONSTANT)
+        mean = num / np.maximum(cnt, 1e-6)[..., None]
+    return mean.astype(np.float64), cnt.astype(np.float64)
+
+
+def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pixels: int = 50,
+                      erode_px: int = 1, denoise_radius: int = 2, outlier_sigma: float = 4.0,
+                      max_pixels: int = 2000, nocs_tolerance: float = 0.05, noise_floor: float = 1e-4,
+                      rng: np.random.Generator | None = None):
+    """Build the per-instance correspondences of one frame (see the module docstring).
+
+    Returns a list of :class:`Instance`, sorted by instance id. Shape or type errors raise
+    ValueError; instances without enough usable pixels are simply absent.
+    """
+    depth, nocs, mask = check_images(depth, nocs, mask)
+    h, w = depth.shape
+    if principal_point is None:
+        cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
+    else:
+        cx, cy = (float(v) for v in principal_point)
+    rng = np.random.default_rng() if rng is None else rng
+    ids, counts = instance_ids(mask, min_object_pixels)
+    out = []
+    if ids.size == 0:
+        return out
+    boxes = _bounding_boxes(mask, ids)
+    for iid, npix, (r0, r1, c0, c1) in zip(ids, counts, boxes):
+        pad = denoise_radius + erode_px + 1
+        r0, r1, c0, c1 = max(r0 - pad, 0), min(r1 + pad, h), max(c0 - pad, 0), min(c1 + pad, w)
+        inst = mask[r0:r1, c0:c1] == iid
+        if erode_px > 0:
+            inst = cv2.erode(inst.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=int(erode_px),
+                             borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+        # Large instances are processed on a strided grid: far more pixels than max_pixels add
+        # cost but little accuracy.
+        st = max(1, int(np.ceil(np.sqrt(npix / (2.0 * max_pixels)))))
+        inst = inst[::st, ::st]
+        dc = depth[r0:r1:st, c0:c1:st].astype(np.float64)
+        pc = nocs[r0:r1:st, c0:c1:st].astype(np.float64)
+        # Channel by channel: numpy reductions over a length-3 last axis are slow.
+        with np.errstate(invalid="ignore"):
+            ok = inst & (dc > 0) & (dc < np.inf)
+            nonzero = np.zeros_like(ok)
+            for ch in range(3):
+                v = pc[..., ch]
+                ok &= (v >= -nocs_tolerance) & (v <= 1 + nocs_tolerance)  # false for NaN
+                nonzero |= v != 0
+            ok &= nonzero
+        if ok.sum() < max(min_object_pixels, 3):
+            continue
+        dz = np.where(ok, dc, 0.0)
+        pz = np.where(ok[..., None], pc, 0.0)
+        sigma_d = _second_diff_sigma(dz, ok)
+        # NOCS noise from the channel sum (independent channel noise adds up in variance).
+        sigma_p = _second_diff_sigma(pz[..., 0] + pz[..., 1] + pz[..., 2], ok) / np.sqrt(3.0)
+        # Below the floor the "noise" is surface curvature: treat the data as exact (no
+        # smoothing, whose curvature bias would then dominate, and no bias correction).
+        depth_med = float(np.median(_thin(dz[ok])))
+        if sigma_d < noise_floor * depth_med:
+            sigma_d = 0.0
+        if sigma_p < noise_floor:
+            sigma_p = 0.0
+        var_d_img = np.full(dz.shape, sigma_d ** 2)
+        if denoise_radius > 0 or outlier_sigma > 0:
+            rad = max(int(round(denoise_radius / st)), 1)  # the same window in image pixels
+            md, cnt = _local_mean(dz, ok, rad)
+            mp, _ = _local_mean(pz, ok, rad)
+            if outlier_sigma > 0:
+                rd = np.abs(dz - md)
+                dp = pz - mp
+                rp = np.sqrt(dp[..., 0] ** 2 + dp[..., 1] ** 2 + dp[..., 2] ** 2)
+                thr_d = outlier_sigma * max(_MAD * np.median(_thin(rd[ok])), 1e-9 * depth_med)
+                thr_p = outlier_sigma * max(_MAD * np.median(_thin(rp[ok])), 1e-9)
+                ok2 = ok & (rd <= thr_d) & (rp <= thr_p)
+                if ok2.sum() >= max(min_object_pixels, 3) and not np.array_equal(ok2, ok):
+                    ok = ok2
+                    md, cnt = _local_mean(dz, ok, rad)
+                    mp, _ = _local_mean(pz, ok, rad)
+            if denoise_radius > 0 and sigma_d > 0:
+                dz = md
+                var_d_img = sigma_d ** 2 / np.maximum(cnt, 1.0)
+            if denoise_radius > 0 and sigma_p > 0:
+                pz = mp
+        rr, cc = np.nonzero(ok)
+        valid = rr.size
+        if valid < max(min_object_pixels, 3):
+            continue
+        if valid > max_pixels:
+            pick = rng.choice(valid, size=max_pixels, replace=False)
+            rr, cc = rr[pick], cc[pick]
+        x = np.column_stack([cc * st + c0 - cx, rr * st + r0 - cy]).astype(np.float64)
+        out.append(Instance(int(iid), x, dz[rr, cc].astype(np.float64), pz[rr, cc].astype(np.float64),
+                            var_d_img[rr, cc].astype(np.float64), sigma_d, sigma_p, int(npix),
+                            int(valid)))
+    return out

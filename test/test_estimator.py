@@ -1,0 +1,158 @@
+"""The frame estimate on rendered frames: exactness, invariance, noise presets, bad input."""
+import numpy as np
+import pytest
+
+from conftest import clean_frame, noisy_frame
+from fcop_ros import FocalEstimate, estimate_focal
+from fcop_ros.core.pose import rotation_angle_deg
+
+
+def _match(est, frame):
+    truth = {o.instance_id: o for o in frame.objects}
+    return [(o, truth[o.instance_id]) for o in est.objects if o.instance_id in truth]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_clean_frames_exact_focal_and_poses(seed):
+    fr = clean_frame(seed)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=seed)
+    assert isinstance(est, FocalEstimate)
+    assert abs(est.focal / fr.focal - 1) < 1e-3
+    pairs = _match(est, fr)
+    visible = [o for o in fr.objects if (fr.mask == o.instance_id).sum() >= 200]
+    assert len(pairs) >= len(visible) >= 3
+    for got, true in pairs:
+        assert np.abs(got.rotation - true.rotation).max() < 1e-3
+        assert np.linalg.norm(got.translation - true.translation) < 1e-3
+        assert abs(got.scale / true.scale - 1) < 1e-3
+
+
+def test_global_depth_scale_leaves_focal_unchanged():
+    for seed, preset in [(1, "clean"), (2, "moderate"), (3, "harsh")]:
+        fr = noisy_frame(seed, preset)
+        base = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0)
+        for k in (0.5, 1.3, 4.0):
+            scaled = estimate_focal(fr.depth * k, fr.nocs, fr.mask, seed=0)
+            assert scaled.focal == pytest.approx(base.focal, rel=1e-5)
+            assert scaled.inlier_count == base.inlier_count
+            # The scale goes into the objects' metric size, and their translation scales with it.
+            for a, b in zip(base.objects, scaled.objects):
+                assert b.scale == pytest.approx(k * a.scale, rel=1e-4)
+
+
+def test_additive_depth_offset_does_bias_focal():
+    """The equation is not offset-invariant: a 10 cm offset at ~1 m must move the estimate."""
+    fr = clean_frame(4)
+    base = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0).focal
+    shifted = estimate_focal(fr.depth + 0.1, fr.nocs, fr.mask, seed=0).focal
+    assert abs(shifted / base - 1) > 0.02
+
+
+def test_principal_point_can_be_given():
+    fr = clean_frame(5)
+    cx, cy = fr.principal_point
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, principal_point=(cx, cy), seed=0)
+    assert est.principal_point == (cx, cy) and abs(est.focal / fr.focal - 1) < 1e-3
+    wrong = estimate_focal(fr.depth, fr.nocs, fr.mask, principal_point=(cx + 60, cy - 40), seed=0)
+    assert abs(wrong.focal / fr.focal - 1) > abs(est.focal / fr.focal - 1)
+
+
+def test_ransac_variant_is_selectable():
+    fr = clean_frame(0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, method="ransac", seed=0)
+    assert est.method == "ransac" and abs(est.focal / fr.focal - 1) < 0.01 and est.objects
+
+
+def test_literal_paper_method_on_clean_frame():
+    """Absolute 5 px bound, no refinement, no denoising: the paper's fCOP-IS."""
+    fr = clean_frame(0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, bound_mode="absolute", noise_bound=5.0, refine=False,
+                         denoise_radius=0, erode_px=0, outlier_sigma=0, seed=0)
+    assert abs(est.focal / fr.focal - 1) < 0.01 and est.interval[0] <= est.focal <= est.interval[1]
+
+
+def _errors(preset, seeds, **opt):
+    focal, rot, trans = [], [], []
+    for s in seeds:
+        fr = noisy_frame(s, preset)
+        est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, **opt)
+        focal.append(np.nan if est.focal is None else 100 * abs(est.focal / fr.focal - 1))
+        for got, true in _match(est, fr):
+            rot.append(rotation_angle_deg(got.rotation, true.rotation))
+            trans.append(100 * np.linalg.norm(got.translation - true.translation) / np.linalg.norm(true.translation))
+    return np.array(focal), np.array(rot), np.array(trans)
+
+
+# Measured on 24 seeded frames (seeds 0..23) with the default options, commit of this test:
+# preset: (median focal %, p90 focal %, median rotation deg, median translation % of distance).
+# Bounds below are these numbers plus a margin of ~25%; tighten them when the estimator improves.
+MEASURED = {
+    "mild": (0.41, 1.04, 0.85, 5.5),
+    "moderate": (0.85, 1.55, 1.58, 11.2),
+    "harsh": (2.43, 5.91, 2.33, 22.0),
+}
+
+
+@pytest.mark.parametrize("preset", sorted(MEASURED))
+def test_noise_presets_regression(preset):
+    focal, rot, trans = _errors(preset, range(24))
+    med, p90, rmed, tmed = MEASURED[preset]
+    assert np.isnan(focal).sum() == 0
+    assert np.median(focal) <= 1.25 * med
+    assert np.percentile(focal, 90) <= 1.25 * p90
+    assert np.median(rot) <= 1.25 * rmed
+    assert np.median(trans) <= 1.25 * tmed
+
+
+class TestBadInput:
+    def setup_method(self):
+        fr = clean_frame(0)
+        self.depth, self.nocs, self.mask = fr.depth, fr.nocs, fr.mask
+
+    def test_mismatched_shapes(self):
+        with pytest.raises(ValueError, match="sizes differ"):
+            estimate_focal(self.depth[:-1], self.nocs, self.mask)
+        with pytest.raises(ValueError, match="nocs must be"):
+            estimate_focal(self.depth, self.nocs[..., :2], self.mask)
+        with pytest.raises(ValueError, match="depth must be"):
+            estimate_focal(self.depth[..., None], self.nocs, self.mask)
+        with pytest.raises(ValueError, match="integer instance ids"):
+            estimate_focal(self.depth, self.nocs, self.mask.astype(float))
+
+    def test_unknown_or_invalid_option(self):
+        with pytest.raises(TypeError, match="unknown option"):
+            estimate_focal(self.depth, self.nocs, self.mask, triplets=5)
+        with pytest.raises(ValueError, match="focal_range"):
+            estimate_focal(self.depth, self.nocs, self.mask, focal_range=(100, 10))
+
+    @pytest.mark.parametrize("case", ["nan_depth", "zero_depth", "inf_depth", "empty_mask", "nocs_zero",
+                                      "nocs_nan", "single_pixel", "tiny_objects", "planar"])
+    def test_no_evidence_gives_none(self, case):
+        depth, nocs, mask = self.depth.copy(), self.nocs.copy(), self.mask.copy()
+        if case == "nan_depth":
+            depth[:] = np.nan
+        elif case == "zero_depth":
+            depth[:] = 0
+        elif case == "inf_depth":
+            depth[:] = np.inf
+        elif case == "empty_mask":
+            mask[:] = 0
+        elif case == "nocs_zero":
+            nocs[:] = 0
+        elif case == "nocs_nan":
+            nocs[:] = np.nan
+        elif case == "single_pixel":
+            mask[:] = 0
+            mask[200, 300] = 1
+        elif case == "tiny_objects":
+            mask[:] = 0
+            mask[100:105, 100:105] = 1
+        elif case == "planar":
+            depth[:] = 1.0  # every object flat at one depth: all triplets degenerate
+        est = estimate_focal(depth, nocs, mask, seed=0)
+        assert est.focal is None and est.reason
+        assert est.objects == []
+
+    def test_one_pixel_image(self):
+        est = estimate_focal(np.ones((1, 1)), np.full((1, 1, 3), 0.5), np.ones((1, 1), np.uint8))
+        assert est.focal is None
