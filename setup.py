@@ -35,6 +35,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
+            "fcop_node = fcop_ros.node:main",
             "fcop_demo = fcop_ros.demo:main",
         ],
     },

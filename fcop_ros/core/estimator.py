@@ -17,8 +17,6 @@ from .refine import ObjectStats, object_stats, refine_focal
 from .solver import sample_triplets, solve_triplets
 from .stabbing import focal_intervals, interval_stabbing
 
-import os
-_EIV = os.environ.get("FCOP_EIV", "1") == "1"
 DEFAULTS = dict(
     triplets_per_object=1500,   # random triplets drawn on each object
     noise_bound=0.05,           # stabbing half-width: relative (fraction) or pixels
@@ -69,6 +67,13 @@ class FocalEstimate:
     stats: ObjectStats = field(default_factory=ObjectStats.empty)
     method: str = "stabbing"
     reason: str = ""
+    instances: list = field(default_factory=list, repr=False)
+
+    def poses_at(self, focal: float) -> list[ObjectPose]:
+        """Poses of this frame's supporting objects at another focal length (e.g. a window's)."""
+        if self.focal is not None and focal == self.focal:
+            return list(self.objects)
+        return _poses(self.instances, float(focal))
 
 
 def _options(options: dict) -> dict:
@@ -125,7 +130,7 @@ def _refine(instances, focal0: float, opt: dict):
         masks.append(inl)
         if inl.sum() < max(opt["min_object_pixels"] // 2, 10):
             continue
-        stats.append(object_stats(inst.x[inl], inst.d[inl], inst.p[inl], inst.var_d[inl] if _EIV else None))
+        stats.append(object_stats(inst.x[inl], inst.d[inl], inst.p[inl], inst.var_d[inl]))
     st = ObjectStats.concatenate(stats)
     search = float(np.log1p(max(3 * opt["noise_bound"] if opt["bound_mode"] == "relative"
                                 else 3 * opt["noise_bound"] / focal0, 0.05)))
@@ -211,7 +216,8 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
         f, support, _ = _ransac(instances, opt, rng)
         if f is None:
             return FocalEstimate(None, reason="no valid RANSAC hypothesis", **base)
-        return FocalEstimate(f, inlier_count=support, focal_votes=f, objects=_poses(instances, f), **base)
+        return FocalEstimate(f, inlier_count=support, focal_votes=f, objects=_poses(instances, f),
+                             instances=instances, **base)
 
     votes, owner = _votes(instances, opt, rng)
     ids = [inst.instance_id for inst in instances]
@@ -242,4 +248,5 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
             focal, est.std_rel, est.stats = f1, std, stats
     est.focal = focal
     est.objects = _poses(support, focal, masks)
+    est.instances = support
     return est

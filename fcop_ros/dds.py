@@ -1,0 +1,36 @@
+"""The shipped Fast DDS profile (large images across processes) and how to point at it."""
+from __future__ import annotations
+
+import os
+from importlib import metadata
+
+from .config import config_path
+
+
+def profile_env_vars() -> tuple[str, ...]:
+    """Environment variables that name the default profiles file for the installed Fast DDS:
+    Jazzy (Fast DDS 2) reads FASTRTPS_DEFAULT_PROFILES_FILE, Kilted (Fast DDS 3) the FASTDDS one
+    and warns that the other is deprecated."""
+    try:
+        metadata.version("ros-jazzy-rclpy")
+        return ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+    except metadata.PackageNotFoundError:
+        pass
+    distro = os.environ.get("ROS_DISTRO", "")
+    if distro in ("humble", "iron", "jazzy"):
+        return ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+    return ("FASTDDS_DEFAULT_PROFILES_FILE",)
+
+
+def large_image_profile() -> str:
+    """Path of config/fastdds_large_images.xml (installed share/ or the source tree)."""
+    return config_path("fastdds_large_images.xml")
+
+
+def use_large_image_profile(env=None) -> dict:
+    """Point ``env`` (default os.environ) at the shipped profile unless already set; return it.
+    Must happen before the process initialises rclpy."""
+    env = os.environ if env is None else env
+    for var in profile_env_vars():
+        env.setdefault(var, large_image_profile())
+    return env

@@ -1,0 +1,307 @@
+"""fcop_node in-process: a private Context, the node and a test node in one executor, spun
+until a condition holds with a deadline."""
+import os
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import CameraInfo, Image
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker, MarkerArray
+
+from conftest import clean_frame
+from fcop_ros.core.pose import rotation_angle_deg
+from fcop_ros.node import FcopNode
+from ros_helpers import Recorder, frame_messages, ros_context, spin_until, stamp_ns
+
+CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config", "fcop.yaml")
+T0 = 1_700_000_000_000_000_000
+DT = 33_333_333
+
+
+class Harness:
+    """fcop_node plus a tester node that publishes inputs and records outputs."""
+
+    def __init__(self, ctx, executor, node_args=None, inputs=("depth", "nocs", "mask"), **node_kwargs):
+        self.node = FcopNode(context=ctx, cli_args=node_args, **node_kwargs)
+        self.tester = Node("tester", context=ctx)
+        self.pubs = [self.tester.create_publisher(Image, t, qos_profile_sensor_data) for t in inputs]
+        self.info = Recorder(self.tester, CameraInfo, "camera_info")
+        self.poses = Recorder(self.tester, PoseArray, "object_poses")
+        self.markers = Recorder(self.tester, MarkerArray, "object_markers")
+        self.ex = executor
+        executor.add_node(self.node)
+        executor.add_node(self.tester)
+        assert spin_until(executor, lambda: all(p.get_subscription_count() for p in self.pubs), 10)
+
+    def send(self, msgs, which=(0, 1, 2)):
+        for i in which:
+            self.pubs[i].publish(msgs[i])
+
+    def settle(self, processed=None, timeout=20.0):
+        """Spin until the node has handled every published frame and is idle."""
+        target = self.node.sync.stats.matched if processed is None else processed
+        return spin_until(self.ex, lambda: self.node.processed >= target and self.node.idle(), timeout)
+
+    def close(self):
+        self.node.destroy_node()
+        self.tester.destroy_node()
+
+
+@pytest.fixture
+def harness():
+    made = []
+
+    def make(args=None, **kw):
+        ctx_mgr = ros_context(args)
+        ctx, ex = ctx_mgr.__enter__()
+        h = Harness(ctx, ex, **kw)
+        made.append((h, ctx_mgr))
+        return h
+
+    yield make
+    for h, ctx_mgr in made:
+        h.close()
+        ctx_mgr.__exit__(None, None, None)
+
+
+# Measured over this test's 12 moderate frames (seeds 0..11, focal drawn per scene, window of 30
+# frames, parameter seed 1): focal error of every published CameraInfo at most 3.0%, median
+# object rotation error 1.6 deg, median translation error 11% of the distance (the preset's global
+# depth scale error goes straight into translation). Bounds: those numbers plus margin.
+FOCAL_BOUND = 0.045
+ROT_MEDIAN_BOUND_DEG = 3.0
+TRANS_MEDIAN_BOUND = 0.2
+
+
+def _camera_frames(n, focal, preset="moderate", first_seed=0):
+    """n frames of one camera (fixed focal) under a noise preset, cached."""
+    from fcop_ros.synthetic import apply_noise, render_scene
+    key = (n, focal, preset, first_seed)
+    if key not in _FRAMES:
+        _FRAMES[key] = [apply_noise(render_scene(np.random.default_rng(first_seed + k), 5, focal), preset,
+                                    np.random.default_rng(500 + first_seed + k)) for k in range(n)]
+    return _FRAMES[key]
+
+
+_FRAMES = {}
+
+
+def test_camera_info_per_input_stamp_within_bound(harness):
+    h = harness(parameter_overrides=[Parameter("seed", value=1)])
+    frames = _camera_frames(12, 600.0)
+    sent = []
+    for k, fr in enumerate(frames):
+        stamp = T0 + k * DT
+        h.send(frame_messages(fr, stamp))
+        sent.append(stamp)
+        assert spin_until(h.ex, lambda: len(h.info) >= k + 1 and len(h.markers) >= k + 1, 20)
+    assert [stamp_ns(m) for m in h.info.msgs] == sent
+    rot, trans = [], []
+    for info, poses, markers, fr in zip(h.info.msgs, h.poses.msgs, h.markers.msgs, frames):
+        # REP-104
+        f = info.k[0]
+        assert info.k[4] == f and info.width == 640 and info.height == 480
+        assert info.k[2] == 319.5 and info.k[5] == 239.5
+        assert abs(f / 600.0 - 1) < FOCAL_BOUND
+        assert list(info.p) == [f, 0, 319.5, 0, 0, f, 239.5, 0, 0, 0, 1, 0]
+        assert list(info.r) == [1, 0, 0, 0, 1, 0, 0, 0, 1]
+        assert info.distortion_model == "plumb_bob" and list(info.d) == [0.0] * 5
+        assert info.header.frame_id == "camera_optical_frame"
+        assert stamp_ns(poses) == stamp_ns(info) == stamp_ns(markers.markers[0])
+        assert markers.markers[0].action == Marker.DELETEALL
+        assert len(markers.markers) == len(poses.poses) + 1 and len(poses.poses) >= 3
+        truth = {o.instance_id: o for o in fr.objects}
+        for pose, marker in zip(poses.poses, markers.markers[1:]):
+            o = truth[marker.id]
+            q = pose.orientation
+            R = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+            rot.append(rotation_angle_deg(R, o.rotation))
+            t = np.array([pose.position.x, pose.position.y, pose.position.z])
+            trans.append(np.linalg.norm(t - o.translation) / np.linalg.norm(o.translation))
+            assert marker.type == Marker.CUBE and marker.scale.x > 0
+    assert np.median(rot) < ROT_MEDIAN_BOUND_DEG
+    assert np.median(trans) < TRANS_MEDIAN_BOUND
+    assert h.node.rejected.total() == 0
+
+
+def test_remapping_and_params_file(harness):
+    h = harness(node_args=["--ros-args", "-r", "depth:=/cam/depth", "-r", "nocs:=/cam/nocs",
+                           "-r", "mask:=/cam/mask", "-r", "camera_info:=/cam/camera_info_est",
+                           "--params-file", CONFIG],
+                inputs=("/cam/depth", "/cam/nocs", "/cam/mask"))
+    assert [s.topic_name for s in h.node._subs] == ["/cam/depth", "/cam/nocs", "/cam/mask"]
+    assert h.node.pub_info.topic_name == "/cam/camera_info_est"
+    rec = Recorder(h.tester, CameraInfo, "/cam/camera_info_est")
+    h.send(frame_messages(clean_frame(0), T0))
+    assert spin_until(h.ex, lambda: len(rec) == 1, 20)
+    assert abs(rec.msgs[0].k[0] / clean_frame(0).focal - 1) < 1e-3
+
+
+def test_params_file_values_are_loaded(harness, tmp_path):
+    text = open(CONFIG).read().replace("window_frames: 30", "window_frames: 7").replace(
+        "sync_mode: exact", "sync_mode: approximate")
+    path = tmp_path / "p.yaml"
+    path.write_text(text)
+    h = harness(node_args=["--ros-args", "--params-file", str(path)])
+    assert h.node.get_parameter("window_frames").value == 7
+    assert h.node.window.max_frames == 7 and h.node.sync.slop_ns == 10_000_000
+    assert h.node.get_parameter("depth_scale").value == 0.001
+    # Every parameter has a description, and numbers a range.
+    for name in h.node.p:
+        d = h.node.describe_parameter(name)
+        assert d.description
+        if isinstance(h.node.p[name], (int, float)) and not isinstance(h.node.p[name], bool):
+            assert d.integer_range or d.floating_point_range
+
+
+def test_runtime_parameter_changes(harness):
+    h = harness()
+    node = h.node
+    ok = node.set_parameters([Parameter("window_frames", value=10), Parameter("sync_mode", value="approximate"),
+                              Parameter("sync_slop", value=0.02)])
+    assert all(r.successful for r in ok)
+    assert node.window.max_frames == 10 and node.sync.slop_ns == 20_000_000
+    bad = {
+        "window_frames": 0,            # below range
+        "noise_bound_mode": "fuzzy",   # not a choice
+        "sync_mode": "sometimes",
+        "focal_min": 30000.0,          # above focal_max
+        "queue_size": "five",          # wrong type
+        "noise_bound": 0.9,            # not a fraction in relative mode
+    }
+    for name, value in bad.items():
+        res = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not res.successful and res.reason, name
+    assert node.get_parameter("window_frames").value == 10 and node.p["sync_mode"] == "approximate"
+    assert node.set_parameters([Parameter("focal_min", value=100.0)])[0].successful
+
+
+def test_reset_service_clears_window(harness):
+    h = harness()
+    for k in range(3):
+        h.send(frame_messages(clean_frame(k), T0 + k * DT))
+        assert spin_until(h.ex, lambda: len(h.info) == k + 1, 20)
+    assert len(h.node.window) == 3
+    client = h.tester.create_client(Trigger, "/fcop_node/reset")
+    assert client.wait_for_service(timeout_sec=5.0)
+    fut = client.call_async(Trigger.Request())
+    assert spin_until(h.ex, fut.done, 10)
+    assert fut.result().success and len(h.node.window) == 0
+    assert h.node.window.current.focal is None
+
+
+def test_latched_estimate_for_late_joiners(harness):
+    h = harness()
+    h.send(frame_messages(clean_frame(1), T0))
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
+    late = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    rec = Recorder(h.tester, CameraInfo, "/fcop_node/latest_camera_info", late)
+    assert spin_until(h.ex, lambda: len(rec) == 1, 10)
+    assert rec.msgs[0].k[0] == h.info.msgs[0].k[0]
+
+
+def test_diagnostics(harness):
+    h = harness(parameter_overrides=[Parameter("diagnostics_period", value=0.1)])
+    rec = Recorder(h.tester, DiagnosticArray, "/diagnostics")
+    assert spin_until(h.ex, lambda: len(rec) >= 1, 10)
+    st = rec.msgs[-1].status[0]
+    assert st.name == "fcop_node: focal estimate" and st.level == st.WARN  # no evidence yet
+    h.send(frame_messages(clean_frame(2), T0))
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
+    n = len(rec)
+    assert spin_until(h.ex, lambda: len(rec) > n, 10)
+    st = rec.msgs[-1].status[0]
+    values = {kv.key: kv.value for kv in st.values}
+    assert st.level == st.OK and abs(float(values["focal_px"]) / clean_frame(2).focal - 1) < 1e-3
+    for key in ("confidence", "window_fill", "frame_rate_hz", "sync_dropped", "processing_ms_median"):
+        assert key in values
+
+
+def test_mixed_encodings_work(harness):
+    h = harness()
+    fr = clean_frame(3)
+    h.send(frame_messages(fr, T0, depth_encoding="16UC1", nocs_encoding="rgb8", mask_encoding="16UC1"))
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
+    # 1 mm depth and 1/255 NOCS quantisation: still within 2%.
+    assert abs(h.info.msgs[0].k[0] / fr.focal - 1) < 0.02
+
+
+def _bad(case, fr):
+    depth, nocs, mask = fr.depth.copy(), fr.nocs.copy(), fr.mask.copy()
+    if case == "nan_depth":
+        depth[:] = np.nan
+    elif case == "zero_depth":
+        depth[:] = 0.0
+    elif case == "empty_mask":
+        mask[:] = 0
+    elif case == "tiny_objects":
+        mask[:] = 0
+        mask[10:14, 10:14] = 1
+    elif case == "nocs_zero":
+        nocs[:] = 0.0
+    return fr.__class__(depth, nocs, mask, fr.focal, fr.principal_point, fr.objects)
+
+
+@pytest.mark.parametrize("case", ["nan_depth", "zero_depth", "empty_mask", "tiny_objects", "nocs_zero"])
+def test_bad_content_never_publishes(harness, case):
+    h = harness()
+    h.send(frame_messages(_bad(case, clean_frame(0)), T0))
+    assert h.settle(1)
+    assert len(h.info) == 0 and h.node.rejected["no_evidence"] == 1
+
+
+def test_wrong_encoding_and_size_mismatch(harness):
+    h = harness()
+    fr = clean_frame(0)
+    d, n, m = frame_messages(fr, T0)
+    wrong = Image(header=d.header, height=d.height, width=d.width, encoding="rgb8", step=d.width * 3,
+                  data=bytes(d.width * d.height * 3))
+    h.send((wrong, n, m))
+    small = frame_messages(clean_frame(0, 320, 240), T0 + DT)
+    h.send((small[0], n, m), which=(0,))
+    h.send((d, n, m), which=(1, 2))
+    n2 = frame_messages(fr, T0 + DT)
+    h.send((small[0], n2[1], n2[2]))
+    assert h.settle(2)
+    assert h.node.rejected["bad_encoding"] == 1 and h.node.rejected["size_mismatch"] == 1
+    assert len(h.info) == 0
+    # The node is alive and still estimates.
+    h.send(frame_messages(fr, T0 + 2 * DT))
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
+
+
+def test_stamps_backwards_and_silent_topic(harness):
+    h = harness()
+    fr = clean_frame(0)
+    h.send(frame_messages(fr, T0 + 10 * DT))
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
+    h.send(frame_messages(fr, T0 + 5 * DT))  # slightly back: late, dropped
+    assert spin_until(h.ex, lambda: h.node.rejected["sync_late"] == 3, 10)
+    assert len(h.info) == 1
+    # One input silent: nothing is matched, the other queues stay bounded (drop oldest).
+    seen = lambda: h.node.sync.pending() + h.node.rejected["sync_queue_full"]  # noqa: E731
+    for k in range(12):
+        h.send(frame_messages(fr, T0 + (20 + k) * DT), which=(0, 1))
+        assert spin_until(h.ex, lambda: seen() == 2 * (k + 1), 10)  # one frame at a time: no DDS-side loss
+    assert h.node.rejected["sync_queue_full"] == 14
+    assert len(h.info) == 1 and h.node.sync.pending() <= 2 * h.node.p["queue_size"]
+    # A big jump back (a looped bag) resets the synchroniser and the window, then works again.
+    h.send(frame_messages(fr, T0 - 100 * DT))
+    assert spin_until(h.ex, lambda: len(h.info) == 2, 20)
+    assert h.node.sync.stats.resets == 1 and len(h.node.window) == 1
+    assert stamp_ns(h.info.msgs[-1]) == T0 - 100 * DT
+
+
+def test_header_is_copied_from_depth(harness):
+    h = harness()
+    d, n, m = frame_messages(clean_frame(4), T0)
+    d.header.frame_id = "my_depth_frame"
+    h.send((d, n, m))
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
+    assert h.info.msgs[0].header.frame_id == "my_depth_frame" and stamp_ns(h.info.msgs[0]) == T0
