@@ -21,7 +21,7 @@ setup(
         ("share/" + package_name + "/config", sorted(glob.glob("config/*"))),
     ],
     python_requires=">=3.10",
-    install_requires=["numpy", "scipy", "opencv-python-headless", "rosbags>=0.10", "matplotlib"],
+    install_requires=["numpy", "scipy", "opencv-python-headless", "rosbags>=0.10", "mcap", "matplotlib", "tqdm"],
     extras_require={
         "kilted": ["ros-" + p for p in _ROS_PACKAGES],
         "jazzy": ["ros-jazzy-" + p for p in _ROS_PACKAGES],
@@ -37,6 +37,8 @@ setup(
         "console_scripts": [
             "fcop_node = fcop_ros.node:main",
             "fcop_demo = fcop_ros.demo:main",
+            "fcop_replay = fcop_ros.replay:main",
+            "fcop_make_bag = fcop_ros.make_bag:main",
         ],
     },
 )

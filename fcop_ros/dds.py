@@ -7,17 +7,23 @@ from importlib import metadata
 from .config import config_path
 
 
-def profile_env_vars() -> tuple[str, ...]:
-    """Environment variables that name the default profiles file for the installed Fast DDS:
-    Jazzy (Fast DDS 2) reads FASTRTPS_DEFAULT_PROFILES_FILE, Kilted (Fast DDS 3) the FASTDDS one
-    and warns that the other is deprecated."""
+def ros_distro() -> str:
+    """The ROS 2 distribution in use: $ROS_DISTRO on a ROS machine, else from the PyPI wheels."""
+    distro = os.environ.get("ROS_DISTRO", "")
+    if distro:
+        return distro
     try:
         metadata.version("ros-jazzy-rclpy")
-        return ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+        return "jazzy"
     except metadata.PackageNotFoundError:
-        pass
-    distro = os.environ.get("ROS_DISTRO", "")
-    if distro in ("humble", "iron", "jazzy"):
+        return "kilted"
+
+
+def profile_env_vars() -> tuple[str, ...]:
+    """Environment variables that name the default profiles file for the installed Fast DDS:
+    Humble to Jazzy (Fast DDS 2) read FASTRTPS_DEFAULT_PROFILES_FILE, Kilted (Fast DDS 3) the
+    FASTDDS one and warns that the other is deprecated."""
+    if ros_distro() in ("humble", "iron", "jazzy"):
         return ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
     return ("FASTDDS_DEFAULT_PROFILES_FILE",)
 

@@ -1,38 +1,43 @@
-"""The embedded default: a synthetic sequence through the estimator, focal estimate vs truth."""
+"""The embedded default (make demo): write a small synthetic bag, replay it through fcop_node,
+print the summary (focal estimate against the truth) and where the report is."""
 from __future__ import annotations
 
 import argparse
+import shutil
 import time
+from pathlib import Path
 
-import numpy as np
-
-from .core import FocalWindow, estimate_focal
-from .synthetic import apply_noise, render_scene
+from .make_bag import TOPICS, make_bag
+from .replay import replay
+from .synthetic import PRESETS, SequenceSpec
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--preset", default="moderate")
+    ap = argparse.ArgumentParser(prog="fcop_demo", description=__doc__)
+    ap.add_argument("--out", default="out/demo", help="directory for the bag and the replay outputs")
+    ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--preset", default="moderate", choices=sorted(PRESETS))
     ap.add_argument("--focal", type=float, default=600.0)
+    ap.add_argument("--zoom-focal", type=float, default=750.0, help="focal length after the zoom at 2/3 of the frames")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
-    window = FocalWindow()
-    print(f"true focal {args.focal:.1f} px, noise preset '{args.preset}', {args.frames} frames of 640x480")
-    t_est = []
-    for k in range(args.frames):
-        rng = np.random.default_rng(args.seed + k)
-        frame = apply_noise(render_scene(rng, 5, args.focal), args.preset, rng)
-        t0 = time.perf_counter()
-        est = estimate_focal(frame.depth, frame.nocs, frame.mask, seed=args.seed + k)
-        win = window.add(est, k / 30.0)
-        t_est.append(time.perf_counter() - t0)
-        fr = "none" if est.focal is None else f"{est.focal:7.1f}"
-        wf = "none" if win.focal is None else f"{win.focal:7.1f} ({100 * (win.focal / args.focal - 1):+.2f}%)"
-        print(f"frame {k:3d}: frame estimate {fr}  window {wf}  objects {len(est.objects)}")
-    print(f"final: {window.current.focal:.1f} px vs true {args.focal:.1f} px; "
-          f"median estimate time {1000 * np.median(t_est):.1f} ms")
-    return 0
+    out = Path(args.out)
+    bag = out / "input_bag"
+    if bag.exists():
+        shutil.rmtree(bag)
+    out.mkdir(parents=True, exist_ok=True)
+    zoom_frame = (2 * args.frames) // 3
+    spec = SequenceSpec(args.frames, 640, 480, args.focal, zoom_frame, args.zoom_focal, args.preset)
+    print(f"1/2 writing a synthetic bag: {args.frames} frames 640x480 at 30 Hz, 5 objects, noise preset "
+          f"'{args.preset}', true focal {args.focal:.0f} px, zoom to {args.zoom_focal:.0f} px at frame {zoom_frame}")
+    t0 = time.perf_counter()
+    make_bag(bag, spec, seed=args.seed)
+    print(f"    {bag} written in {time.perf_counter() - t0:.1f} s")
+    print("2/2 replaying it through fcop_node (in-process, over DDS)")
+    summary = replay(bag, TOPICS["depth"], TOPICS["nocs"], TOPICS["mask"], out, truth_topic=TOPICS["truth"])
+    print(summary.text())
+    print(f"report image: {out / 'report.png'}")
+    return 0 if summary.frames_estimated else 1
 
 
 if __name__ == "__main__":

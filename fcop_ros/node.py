@@ -107,6 +107,8 @@ class FcopNode(Node):
             raise ValueError(f"fcop_node: invalid parameters: {problem}")
 
         self.rejected: Counter = Counter()
+        self.last = None  # (stamp ns, WindowEstimate, FocalEstimate, CameraInfo) of the last publication
+        self.received = 0
         self.processed = 0
         self.published = 0
         self.handoff_dropped = 0
@@ -207,6 +209,7 @@ class FcopNode(Node):
     def _on_image(self, index: int, msg: Image) -> None:
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         with self._lock:
+            self.received += 1
             before = Counter(self.sync.stats.dropped)
             resets = self.sync.stats.resets
             sets = self.sync.add(index, stamp, msg)
@@ -300,8 +303,8 @@ class FcopNode(Node):
             self.pub_poses.publish(pose_array(objects, header))
         if p["publish_markers"]:
             self.pub_markers.publish(marker_array(objects, header))
+        self.last = (stamp, win, est, info)
         self.published += 1
-        self.last = (win, est)
         return True
 
     # ----- services and diagnostics

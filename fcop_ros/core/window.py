@@ -127,7 +127,14 @@ class FocalWindow:
         thr = max(np.log1p(self.change_threshold), 4.0 * spread / np.sqrt(k))
         if not (np.all(dev > 0) or np.all(dev < 0)) or abs(dev.mean()) <= thr:
             return False
-        for _ in range(len(frames) - k):
+        # Keep the trailing run of frames that each moved by more than half the threshold: the
+        # oldest of the k may still show the old focal length.
+        keep = 0
+        for d in dev[::-1]:
+            if abs(d) <= thr / 2:
+                break
+            keep += 1
+        for _ in range(len(frames) - max(keep, 1)):
             self._frames.popleft()
         self.changes += 1
         return True

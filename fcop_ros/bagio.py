@@ -1,0 +1,149 @@
+"""ROS 2 bags through rosbags (no rosbag2_py, no ros2 CLI): open, list, stream, write.
+
+Messages are serialised with rclpy (CDR, the bytes a live publisher sends), so raw bag records
+go straight into ``rclpy.serialization.deserialize_message`` or ``Publisher.publish``. Bags are
+written with metadata version 8, which the rosbag2 of Jazzy and later reads.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from rclpy.serialization import serialize_message
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from .dds import ros_distro
+
+STORAGES = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}
+BAG_VERSION = 8
+
+
+class BagError(RuntimeError):
+    """A bag that cannot be used as asked; the message says why and what the bag holds."""
+
+
+def typestore():
+    """The rosbags type store of the ROS distribution in use (message definitions and hashes)."""
+    return get_typestore(Stores.ROS2_JAZZY if ros_distro() == "jazzy" else Stores.ROS2_KILTED)
+
+
+def type_name(msg_class) -> str:
+    """'sensor_msgs/msg/Image' for rclpy's sensor_msgs.msg.Image."""
+    module = msg_class.__module__.split(".")
+    return f"{module[0]}/msg/{msg_class.__name__}"
+
+
+class BagWriter:
+    """Write rclpy messages to a new bag; topics are added on first use."""
+
+    def __init__(self, path, storage: str = "mcap"):
+        if storage not in STORAGES:
+            raise BagError(f"unknown storage {storage!r}; use one of {sorted(STORAGES)}")
+        path = Path(path)
+        if path.exists():
+            raise BagError(f"{path} exists; rosbag2 bags are directories that must not exist yet")
+        self._writer = Writer(path, version=BAG_VERSION, storage_plugin=STORAGES[storage])
+        self._ts = typestore()
+        self._conns = {}
+        self.path = path
+
+    def __enter__(self):
+        self._writer.open()
+        return self
+
+    def __exit__(self, *exc):
+        self._writer.close()
+
+    def write(self, topic: str, msg, stamp_ns: int) -> None:
+        self.write_raw(topic, type_name(type(msg)), serialize_message(msg), stamp_ns)
+
+    def write_raw(self, topic: str, msgtype: str, data: bytes, stamp_ns: int) -> None:
+        conn = self._conns.get(topic)
+        if conn is None:
+            conn = self._conns[topic] = self._writer.add_connection(topic, msgtype, typestore=self._ts)
+        self._writer.write(conn, int(stamp_ns), data)
+
+
+class BagSource:
+    """Stream the messages of a bag, surviving damage where the storage allows it.
+
+    A bag rosbags can open is read through rosbags. An MCAP bag it cannot open (a truncated file
+    has no summary at its end) is read sequentially with the mcap library up to the damage;
+    ``damaged`` then says what happened. A damaged sqlite3 bag cannot be salvaged: BagError.
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.damaged = ""
+        if not self.path.exists():
+            raise BagError(f"bag not found: {self.path}")
+        if self.path.is_file():
+            raise BagError(f"{self.path} is a file; give the bag directory (the one holding metadata.yaml)")
+        if not (self.path / "metadata.yaml").is_file():
+            raise BagError(f"{self.path} is not a ROS 2 bag directory (no metadata.yaml)")
+        self._reader = None
+        try:
+            reader = Reader(self.path)
+            reader.open()
+            self._reader = reader
+            self.topics = {c.topic: c.msgtype for c in reader.connections}
+            self.counts = {}
+            for c in reader.connections:
+                self.counts[c.topic] = self.counts.get(c.topic, 0) + c.msgcount
+        except Exception as exc:  # rosbags raises several types for damaged metadata or storage
+            self._mcap = sorted(self.path.glob("*.mcap"))
+            if not self._mcap:
+                raise BagError(f"cannot open bag {self.path}: {exc}") from exc
+            self.damaged = f"{type(exc).__name__}: {exc}"
+            self.topics, self.counts = self._scan_mcap()
+            if not self.topics:
+                raise BagError(f"cannot open bag {self.path} ({self.damaged}) and no message is readable") from exc
+
+    def _records(self):
+        """(topic, type, log time, raw) of every readable MCAP message, in file order."""
+        from mcap.records import Channel, Message, Schema
+        from mcap.stream_reader import StreamReader
+
+        for file in self._mcap:
+            schemas, channels = {}, {}
+            try:
+                with open(file, "rb") as fh:
+                    for rec in StreamReader(fh).records:
+                        if isinstance(rec, Schema):
+                            schemas[rec.id] = rec.name
+                        elif isinstance(rec, Channel):
+                            channels[rec.id] = (rec.topic, schemas.get(rec.schema_id, ""))
+                        elif isinstance(rec, Message) and rec.channel_id in channels:
+                            topic, msgtype = channels[rec.channel_id]
+                            yield topic, msgtype, rec.log_time, rec.data
+            except Exception as exc:  # the damage: stop here, say where
+                self.damaged = f"{file.name} unreadable after this point ({type(exc).__name__}: {exc})"
+                return
+
+    def _scan_mcap(self):
+        topics, counts = {}, {}
+        for topic, msgtype, _, _ in self._records():
+            topics[topic] = msgtype
+            counts[topic] = counts.get(topic, 0) + 1
+        return topics, counts
+
+    def messages(self, topics):
+        """Yield (topic, timestamp ns, raw CDR bytes) of the given topics in time order."""
+        wanted = set(topics)
+        if self._reader is not None:
+            conns = [c for c in self._reader.connections if c.topic in wanted]
+            for conn, ts, raw in self._reader.messages(connections=conns):
+                yield conn.topic, ts, raw
+        else:
+            for topic, _, ts, raw in self._records():
+                if topic in wanted:
+                    yield topic, ts, raw
+
+    def describe(self) -> str:
+        return ", ".join(f"{t} ({ty}, {self.counts.get(t, 0)} msgs)" for t, ty in sorted(self.topics.items())) \
+            or "no topics"
+
+    def close(self) -> None:
+        if self._reader is not None:
+            self._reader.close()

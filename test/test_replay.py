@@ -1,0 +1,215 @@
+"""fcop_make_bag and fcop_replay on tiny bags made in the test: outputs, storages, encodings,
+the zoom case, every error case, damaged bags, and play mode."""
+import csv
+import threading
+import time
+
+import numpy as np
+import pytest
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Header
+
+from fcop_ros import make_bag as mb
+from fcop_ros import replay as rp
+from fcop_ros.bagio import BagSource, BagWriter
+from fcop_ros.synthetic import SequenceSpec
+from msg_adapters import depth_to_image
+from ros_helpers import ros_context, spin_until, stamp_ns
+
+W, H, F = 160, 120, 150.0
+START = 1_700_000_000_000_000_000
+
+
+def tiny_bag(path, frames=6, storage="mcap", preset="mild", rate=30.0, zoom=None, **enc):
+    spec = SequenceSpec(frames, W, H, F, zoom[0] if zoom else None, zoom[1] if zoom else None, preset, 4)
+    mb.make_bag(path, spec, rate=rate, seed=3, storage=storage, **enc)
+    return path
+
+
+def run(bag, out, **kw):
+    return rp.replay(bag, mb.TOPICS["depth"], mb.TOPICS["nocs"], mb.TOPICS["mask"], out,
+                     truth_topic=kw.pop("truth_topic", mb.TOPICS["truth"]), progress=False, **kw)
+
+
+def read_csv(path):
+    with open(path) as fh:
+        return list(csv.DictReader(fh))
+
+
+def read_bag(path):
+    src = BagSource(path)
+    try:
+        return src.topics, list(src.messages(list(src.topics)))
+    finally:
+        src.close()
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_replay_outputs(tmp_path, storage):
+    bag = tiny_bag(tmp_path / "in", storage=storage)
+    s = run(bag, tmp_path / "out", out_storage=storage)
+    stamps = [START + k * int(round(1e9 / 30)) for k in range(6)]
+    assert s.frames_read == 6 and s.frames_estimated == 6 and not s.damaged
+    rows = read_csv(tmp_path / "out" / "estimates.csv")
+    assert list(rows[0]) == rp.CSV_COLUMNS + ["focal_true", "focal_error_pct"]
+    assert [int(r["stamp_ns"]) for r in rows] == stamps
+    for r in rows:
+        assert float(r["focal_true"]) == F and abs(float(r["focal_error_pct"])) < 5.0
+        assert float(r["cx"]) == (W - 1) / 2 and int(r["objects"]) >= 1 and 0 < float(r["confidence"]) <= 1
+    # The output bag: CameraInfo per REP-104 at the input stamps, poses and markers alongside.
+    topics, msgs = read_bag(tmp_path / "out" / "fcop_output")
+    assert topics == {"/fcop/camera_info": "sensor_msgs/msg/CameraInfo",
+                      "/fcop/object_poses": "geometry_msgs/msg/PoseArray",
+                      "/fcop/object_markers": "visualization_msgs/msg/MarkerArray"}
+    infos = [(ts, deserialize_message(raw, CameraInfo)) for t, ts, raw in msgs if t == "/fcop/camera_info"]
+    assert [ts for ts, _ in infos] == stamps and [stamp_ns(i) for _, i in infos] == stamps
+    for _, info in infos:
+        f = info.k[0]
+        assert info.k[4] == f and list(info.p) == [f, 0, info.k[2], 0, 0, f, info.k[5], 0, 0, 0, 1, 0]
+        assert info.distortion_model == "plumb_bob" and (info.width, info.height) == (W, H)
+    assert sorted(ts for t, ts, _ in msgs if t == "/fcop/object_poses") == stamps
+    png = (tmp_path / "out" / "report.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    assert "median" in s.text() and "frames estimated  6" in s.text()
+
+
+@pytest.mark.parametrize("depth_encoding", ["32FC1", "16UC1"])
+@pytest.mark.parametrize("nocs_encoding", ["32FC3", "rgb8"])
+@pytest.mark.parametrize("mask_encoding", ["mono8", "16UC1"])
+def test_every_encoding(tmp_path, depth_encoding, nocs_encoding, mask_encoding):
+    bag = tiny_bag(tmp_path / "in", frames=3, depth_encoding=depth_encoding, nocs_encoding=nocs_encoding,
+                   mask_encoding=mask_encoding)
+    src = BagSource(bag)
+    encs = {t: deserialize_message(raw, Image).encoding for t, _, raw in src.messages(
+        [mb.TOPICS["depth"], mb.TOPICS["nocs"], mb.TOPICS["mask"]])}
+    src.close()
+    assert encs == {mb.TOPICS["depth"]: depth_encoding, mb.TOPICS["nocs"]: nocs_encoding,
+                    mb.TOPICS["mask"]: mask_encoding}
+    s = run(bag, tmp_path / "out")
+    assert s.frames_estimated == 3 and max(s.errors_pct) < 6.0 and not s.rejected
+
+
+def test_zoom_reconverges_in_the_csv(tmp_path):
+    bag = tiny_bag(tmp_path / "in", frames=24, zoom=(12, 190.0))
+    run(bag, tmp_path / "out")
+    rows = read_csv(tmp_path / "out" / "estimates.csv")
+    err = [abs(float(r["focal_error_pct"])) for r in rows]
+    assert [float(r["focal_true"]) for r in rows][11:13] == [F, 190.0]
+    assert max(err[4:12]) < 4.0          # settled on the first focal length
+    assert max(err[18:]) < 4.0           # and on the second, a few frames after the zoom
+
+
+def test_cli_errors(tmp_path, capsys):
+    bag = tiny_bag(tmp_path / "in", frames=2)
+    base = ["--nocs-topic", mb.TOPICS["nocs"], "--mask-topic", mb.TOPICS["mask"], "--out", str(tmp_path / "o")]
+    assert rp.main([str(tmp_path / "missing"), "--depth-topic", "/x"] + base) == 2
+    assert "bag not found" in capsys.readouterr().err
+    assert rp.main([str(bag), "--depth-topic", "/camera/dpth"] + base) == 2
+    err = capsys.readouterr().err
+    assert "'/camera/dpth' is not in the bag; it has:" in err and "/camera/depth (sensor_msgs/msg/Image, 2 msgs)" in err
+    assert rp.main([str(bag), "--depth-topic", mb.TOPICS["truth"]] + base) == 2
+    assert "has type sensor_msgs/msg/CameraInfo, expected sensor_msgs/msg/Image" in capsys.readouterr().err
+    assert rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--truth-topic", mb.TOPICS["poses"]] + base) == 2
+    assert "expected sensor_msgs/msg/CameraInfo" in capsys.readouterr().err
+    assert rp.main([str(bag / "metadata.yaml"), "--depth-topic", "/x"] + base) == 2
+    assert "give the bag directory" in capsys.readouterr().err
+    assert rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "-p", "window_frames=3"] + base) == 2
+    assert "NAME:=VALUE" in capsys.readouterr().err
+
+
+def _bag_of(path, frames):
+    """A bag with only the given (topic, Image) per stamp."""
+    with BagWriter(path, "mcap") as w:
+        for stamp, items in frames:
+            for topic, msg in items:
+                w.write(topic, msg, stamp)
+    return path
+
+
+def test_unsupported_encoding_and_no_matching_frames(tmp_path, capsys):
+    h = Header()
+    img = depth_to_image(np.ones((8, 8)), "32FC1", h)
+    bad = Image(header=h, height=8, width=8, encoding="mono8", step=8, data=bytes(64))
+    bag = _bag_of(tmp_path / "bad", [(START, [("/d", bad), ("/n", img), ("/m", img)])])
+    args = ["--depth-topic", "/d", "--nocs-topic", "/n", "--mask-topic", "/m", "--out", str(tmp_path / "o")]
+    assert rp.main([str(bag)] + args) == 2
+    assert "depth topic: unsupported encoding 'mono8'; supported: 32FC1, 64FC1, 16UC1" in capsys.readouterr().err
+    # Depth and mask never share a stamp: nothing matches, the replay says so.
+    from msg_adapters import mask_to_image, nocs_to_image
+    frames = []
+    for k in range(3):
+        ha, hb = Header(), Header()
+        ha.stamp.sec, hb.stamp.sec = 100 + k, 200 + k
+        frames.append((START + k, [("/d", depth_to_image(np.ones((8, 8)), "32FC1", ha)),
+                                   ("/n", nocs_to_image(np.full((8, 8, 3), 0.5), "32FC3", ha)),
+                                   ("/m", mask_to_image(np.ones((8, 8), int), "mono8", hb))]))
+    bag2 = _bag_of(tmp_path / "nomatch", frames)
+    assert rp.main([str(bag2)] + args) == 1
+    err = capsys.readouterr()
+    assert "no frame was estimated" in err.err and "frames estimated  0" in err.out
+
+
+def test_truncated_mcap_keeps_what_came_before(tmp_path, capsys):
+    bag = tiny_bag(tmp_path / "in", frames=8)
+    f = next(bag.glob("*.mcap"))
+    data = f.read_bytes()
+    f.write_bytes(data[: len(data) // 2])
+    out = tmp_path / "out"
+    code = rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic", mb.TOPICS["nocs"],
+                    "--mask-topic", mb.TOPICS["mask"], "--truth-topic", mb.TOPICS["truth"], "--out", str(out)])
+    text = capsys.readouterr().out
+    assert code == 3 and "bag damaged" in text
+    rows = read_csv(out / "estimates.csv")
+    assert 1 <= len(rows) < 8 and all(abs(float(r["focal_error_pct"])) < 5 for r in rows)
+    assert (out / "report.png").stat().st_size > 0
+    _, msgs = read_bag(out / "fcop_output")
+    assert sum(t == "/fcop/camera_info" for t, _, _ in msgs) == len(rows)
+
+
+def test_damaged_sqlite_is_a_clear_error(tmp_path, capsys):
+    bag = tiny_bag(tmp_path / "in", frames=3, storage="sqlite3")
+    f = next(bag.glob("*.db3"))
+    f.write_bytes(f.read_bytes()[:4096])
+    assert rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic", mb.TOPICS["nocs"],
+                    "--mask-topic", mb.TOPICS["mask"], "--out", str(tmp_path / "o")]) == 2
+    assert "cannot open bag" in capsys.readouterr().err
+
+
+def test_make_bag_cli(tmp_path, capsys):
+    out = tmp_path / "cli_bag"
+    assert mb.main([str(out), "--frames", "2", "--width", "64", "--height", "48", "--focal", "60",
+                    "--storage", "sqlite3", "--zoom-frame", "1", "--zoom-focal", "80"]) == 0
+    topics, msgs = read_bag(out)
+    assert set(topics) == set(mb.TOPICS.values()) and len(msgs) == 10
+    infos = [deserialize_message(raw, CameraInfo) for t, _, raw in msgs if t == mb.TOPICS["truth"]]
+    assert [i.k[0] for i in infos] == [60.0, 80.0]
+    assert mb.main([str(out), "--frames", "2"]) == 2  # exists
+    assert mb.main([str(tmp_path / "x"), "--zoom-frame", "1"]) == 2
+    capsys.readouterr()
+
+
+def test_play_mode_timing_and_order(tmp_path):
+    bag = tiny_bag(tmp_path / "in", frames=6, rate=10.0)  # 0.5 s of recording
+    topics = [mb.TOPICS["depth"], mb.TOPICS["nocs"], mb.TOPICS["mask"]]
+    with ros_context() as (ctx, ex):
+        sub_node = Node("play_listener", context=ctx)
+        got = {t: [] for t in topics}
+        for t in topics:
+            sub_node.create_subscription(Image, t, lambda m, t=t: got[t].append((stamp_ns(m), time.monotonic())), 50)
+        ex.add_node(sub_node)
+        result = {}
+        th = threading.Thread(target=lambda: result.setdefault("n", rp.play(bag, topics, rate=2.0, context=ctx)))
+        th.start()
+        assert spin_until(ex, lambda: all(len(v) == 6 for v in got.values()), 30)
+        th.join(10)
+        assert result["n"] == 18
+        for t in topics:
+            stamps = [s for s, _ in got[t]]
+            assert stamps == sorted(stamps) and len(set(stamps)) == 6
+        arrivals = [a for _, a in got[topics[0]]]
+        span = arrivals[-1] - arrivals[0]
+        # 0.5 s recorded at rate 2 is 0.25 s; a generous window, not a timing assert.
+        assert 0.12 < span < 2.0
+        sub_node.destroy_node()
