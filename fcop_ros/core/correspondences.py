@@ -94,8 +94,8 @@ def instance_ids(mask: np.ndarray, min_pixels: int = 1):
 def _bounding_boxes(mask: np.ndarray, ids: np.ndarray):
     """(row0, row1, col0, col1) half-open bounding box of each id, in one pass over the image."""
     if ids.max() <= 1 << 16:
-        lab = mask if mask.dtype.kind in "iu" and mask.dtype.itemsize <= 4 else mask.astype(np.int64)
-        objs = ndimage.find_objects(np.where(lab > 0, lab, 0), max_label=int(ids.max()))
+        lab = mask if mask.dtype.kind == "u" else np.maximum(mask, 0)
+        objs = ndimage.find_objects(lab, max_label=int(ids.max()))
         return [(objs[i - 1][0].start, objs[i - 1][0].stop, objs[i - 1][1].start, objs[i - 1][1].stop)
                 for i in ids]
     boxes = []
@@ -120,7 +120,7 @@ def _second_diff_sigma(img: np.ndarray, ok: np.ndarray) -> float:
     return float(_MAD * np.median(np.abs(v - np.median(v))) / np.sqrt(6.0))
 
 
-def _thin(v: np.ndarray, n: int = 2048) -> np.ndarray:
+def _thin(v: np.ndarray, n: int = 1000) -> np.ndarray:
     """A strided subset of about n values: robust scales need no more, and medians are costly."""
     return v[:: v.size // n] if v.size > 2 * n else v
 

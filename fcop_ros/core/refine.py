@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 
 @dataclass
@@ -53,16 +54,17 @@ def object_stats(x: np.ndarray, d: np.ndarray, p: np.ndarray, var_d=None, n_eff=
     p (N,3) NOCS, var_d optional per-pixel depth noise variance (m^2) for the bias correction,
     n_eff optional effective sample size (defaults to N)."""
     y = np.column_stack([d * x[:, 0], d * x[:, 1], d])
-    yc = y - y.mean(0)
-    pc = p - p.mean(0)
     n = len(d)
+    ones = np.full(n, 1.0 / n)
+    yc = y - ones @ y  # BLAS means: .mean(0) on (n, 3) is slow
+    pc = p - ones @ p
     cpy = pc.T @ yc / n
     cyy = yc.T @ yc / n
     if var_d is not None:
         r = np.column_stack([x, np.ones(n)])
         bias = (r * np.broadcast_to(var_d, (n,))[:, None]).T @ r / n
         cyy = cyy - _limit_bias(bias, cyy)
-    vp = float((pc * pc).sum(1).mean())
+    vp = float(np.einsum("ij,ij->", pc, pc)) / n
     return ObjectStats(np.array([float(n if n_eff is None else n_eff)]), cpy[None], cyy[None], np.array([vp]))
 
 
@@ -91,30 +93,25 @@ def profile_cost(stats: ObjectStats, focal) -> np.ndarray:
     return (stats.n[None] * np.log(rss)).sum(-1)
 
 
-def refine_focal(stats: ObjectStats, focal0: float, search: float = 0.3, grid: int = 41, tol: float = 1e-7):
+def refine_focal(stats: ObjectStats, focal0: float, search: float = 0.3, grid: int = 25, tol: float = 1e-8):
     """Minimise :func:`profile_cost` over log f within focal0 * exp(+-search).
 
-    Nested vectorised grids: the first finds the basin (the cost can have a second minimum far
-    away), each next one zooms on the best cell until the step is below ``tol`` in log f.
+    A vectorised grid finds the basin (the cost can have a second minimum far away), Brent's
+    bounded search polishes it to ``tol`` in log f.
     Returns (focal, std_rel): std_rel is the relative standard error from the cost's curvature
     (optimistic when pixel noise is correlated), or None.
     """
     if len(stats) == 0 or not np.isfinite(focal0) or focal0 <= 0:
         return None, None
-    lo, hi = np.log(focal0) - search, np.log(focal0) + search
-    first = True
-    while True:
-        g = np.linspace(lo, hi, grid if first else 11)
-        first = False
-        cost = profile_cost(stats, np.exp(g))
-        if not np.isfinite(cost).any():
-            return None, None
-        i = int(np.argmin(np.where(np.isfinite(cost), cost, np.inf)))
-        step = g[1] - g[0]
-        lo, hi = g[i] - step, g[i] + step
-        if step < tol:
-            break
-    c = g[i]
+    g = np.linspace(np.log(focal0) - search, np.log(focal0) + search, grid)
+    cost = profile_cost(stats, np.exp(g))
+    if not np.isfinite(cost).any():
+        return None, None
+    i = int(np.argmin(np.where(np.isfinite(cost), cost, np.inf)))
+    lo, hi = g[max(i - 1, 0)], g[min(i + 1, grid - 1)]
+    res = minimize_scalar(lambda c: float(profile_cost(stats, np.exp(c))[0]), bounds=(lo, hi), method="bounded",
+                          options={"xatol": tol})
+    c = float(res.x) if res.fun <= cost[i] else float(g[i])
     h = 1e-4
     fm, f0, fp = profile_cost(stats, np.exp([c - h, c, c + h]))
     curv = (fm - 2 * f0 + fp) / h ** 2

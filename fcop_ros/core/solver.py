@@ -54,26 +54,35 @@ def solve_triplets(x: np.ndarray, d: np.ndarray, p: np.ndarray, triplets: np.nda
     if tri.size and (tri.min() < 0 or tri.max() >= x.shape[0]):
         raise ValueError("solve_triplets: triplet index out of range")
 
-    a = tri[:, [0, 1, 0]]
-    b = tri[:, [1, 2, 2]]
-    nocs_sq, image_sq, depth_sq = pair_terms(x, d, p, a, b)  # each (T, 3)
+    # Gather each triplet's points once; every pair term is then written out per component on
+    # contiguous 1-D columns (reductions over a length-2/3 last axis are slow in numpy).
+    i, j, k = tri[:, 0], tri[:, 1], tri[:, 2]
+    ycols = (d * x[:, 0], d * x[:, 1])
+    P = [[p[idx, c] for c in range(3)] for idx in (i, j, k)]
+    Y = [[yc[idx] for yc in ycols] for idx in (i, j, k)]
+    Dd = [d[idx] for idx in (i, j, k)]
+    nocs_sq, image_sq, depth_sq = [], [], []
+    for a, b in ((0, 1), (1, 2), (0, 2)):
+        nocs_sq.append((P[a][0] - P[b][0]) ** 2 + (P[a][1] - P[b][1]) ** 2 + (P[a][2] - P[b][2]) ** 2)
+        image_sq.append((Y[a][0] - Y[b][0]) ** 2 + (Y[a][1] - Y[b][1]) ** 2)
+        depth_sq.append((Dd[a] - Dd[b]) ** 2)
 
     # Least squares of  s2 * nocs_sq - w * image_sq = depth_sq  over the three rows, with the
     # columns normalised so that the 2x2 normal equations stay well conditioned
     # (image_sq is ~1e6 times larger than nocs_sq in typical units).
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        na = np.sqrt((nocs_sq * nocs_sq).sum(1))
-        nb = np.sqrt((image_sq * image_sq).sum(1))
+        na = np.sqrt(nocs_sq[0] ** 2 + nocs_sq[1] ** 2 + nocs_sq[2] ** 2)
+        nb = np.sqrt(image_sq[0] ** 2 + image_sq[1] ** 2 + image_sq[2] ** 2)
         ok = (na > 0) & (nb > 0) & np.isfinite(na) & np.isfinite(nb)
         na = np.where(ok, na, 1.0)
         nb = np.where(ok, nb, 1.0)
-        A = nocs_sq / na[:, None]
-        B = image_sq / nb[:, None]
-        saa = (A * A).sum(1)
-        sbb = (B * B).sum(1)
-        sab = (A * B).sum(1)
-        sac = (A * depth_sq).sum(1)
-        sbc = (B * depth_sq).sum(1)
+        A = [v / na for v in nocs_sq]
+        B = [v / nb for v in image_sq]
+        saa = A[0] * A[0] + A[1] * A[1] + A[2] * A[2]
+        sbb = B[0] * B[0] + B[1] * B[1] + B[2] * B[2]
+        sab = A[0] * B[0] + A[1] * B[1] + A[2] * B[2]
+        sac = A[0] * depth_sq[0] + A[1] * depth_sq[1] + A[2] * depth_sq[2]
+        sbc = B[0] * depth_sq[0] + B[1] * depth_sq[1] + B[2] * depth_sq[2]
         det = saa * sbb - sab * sab
         ok &= det > _DEGENERATE_REL_DET * saa * sbb
         det = np.where(ok, det, 1.0)

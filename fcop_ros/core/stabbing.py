@@ -49,17 +49,24 @@ def interval_stabbing(lo, hi, weights=None) -> StabbingResult:
     use = np.isfinite(lo) & np.isfinite(hi) & (lo <= hi) & np.isfinite(w) & (w > 0)
     if not use.any():
         return StabbingResult(None, 0.0, None, np.zeros(n, dtype=bool))
-    lo_u, hi_u, w_u = lo[use], hi[use], w[use]
-    m = lo_u.size
-    coords = np.concatenate([lo_u, hi_u])
-    # kind 0 = start, 1 = end: at equal coordinates starts come first (touching intervals overlap).
-    kind = np.concatenate([np.zeros(m, dtype=np.int8), np.ones(m, dtype=np.int8)])
-    delta = np.concatenate([w_u, -w_u])
-    order = np.lexsort((kind, coords))
-    depth = np.cumsum(delta[order])
-    best = int(np.argmax(depth))  # first maximum: leftmost region; always a start event
-    start = coords[order[best]]
-    end = coords[order[best + 1]]  # the next event is an end (or a start at the same place)
+    # Processing the starts in sorted order, the depth just after the i-th start x is
+    # W(first i+1 starts) - W(hi < x) (closed intervals: an end at x still counts), and the
+    # maximum is attained at a start. Sorts and one binary search: O(n log n). With ties among
+    # the starts the cumulative weight grows along them, so the first maximum is the last of
+    # the tied starts, as it must be.
+    lo_u, hi_u = lo[use], hi[use]
+    if weights is None:
+        lo_s, hi_s = np.sort(lo_u), np.sort(hi_u)
+        depth = np.arange(1, lo_s.size + 1) - np.searchsorted(hi_s, lo_s, side="left")
+    else:
+        w_u = w[use]
+        order_lo, order_hi = np.argsort(lo_u), np.argsort(hi_u)
+        lo_s, hi_s = lo_u[order_lo], hi_u[order_hi]
+        cw_hi = np.concatenate([[0.0], np.cumsum(w_u[order_hi])])
+        depth = np.cumsum(w_u[order_lo]) - cw_hi[np.searchsorted(hi_s, lo_s, side="left")]
+    best = int(np.argmax(depth))  # first maximum in sorted order: the leftmost region
+    start = lo_s[best]
+    end = hi_s[np.searchsorted(hi_s, start, side="left")]  # the first end at or after the start
     point = 0.5 * (start + end)
     inliers = (lo <= point) & (point <= hi) & np.isfinite(lo) & np.isfinite(hi)
     count = float(w[inliers & use].sum())

@@ -65,7 +65,7 @@ class FocalWindow:
     def __init__(self, max_frames: int = 30, max_age: float | None = None, noise_bound: float = 0.05,
                  bound_mode: str = "relative", min_frames: int = 1, min_support: int = 30,
                  min_inlier_ratio: float = 0.05, change_threshold: float = 0.08, change_frames: int = 3,
-                 votes_per_frame: int = 1000, refine: bool = True, seed: int | None = 0):
+                 votes_per_frame: int = 300, refine: bool = True, seed: int | None = 0):
         if max_frames < 1:
             raise ValueError("max_frames must be >= 1")
         if max_age is not None and not max_age > 0:
@@ -161,7 +161,7 @@ class FocalWindow:
         if self.refine and agree:
             stats = ObjectStats.concatenate([f.stats for f in agree])
             if len(stats):
-                f1, std = refine_focal(stats, f0, search=float(2 * band))
+                f1, std = refine_focal(stats, f0, search=float(2 * band), grid=9, tol=1e-7)
                 if f1 is not None:
                     focal = f1
         spread = _robust_spread([f.focal for f in frames if f.focal is not None])
