@@ -107,7 +107,7 @@ class FcopNode(Node):
             raise ValueError(f"fcop_node: invalid parameters: {problem}")
 
         self.rejected: Counter = Counter()
-        self.last = None  # (stamp ns, WindowEstimate, FocalEstimate, CameraInfo) of the last publication
+        self.last = None  # (stamp ns, WindowEstimate, published ObjectPoses, CameraInfo) of the last publication
         self.received = 0
         self.processed = 0
         self.published = 0
@@ -283,7 +283,7 @@ class FcopNode(Node):
         est = estimate_focal(depth, nocs, mask, (cx, cy), triplets_per_object=p["triplets_per_object"],
                              noise_bound=p["noise_bound"], bound_mode=p["noise_bound_mode"],
                              focal_range=(p["focal_min"], p["focal_max"]), min_object_pixels=p["min_object_pixels"],
-                             seed=int(self._rng.integers(2 ** 31)))
+                             poses=False, seed=int(self._rng.integers(2 ** 31)))
         if est.focal is None:
             self.rejected["no_evidence"] += 1
             self._throttle.warn("no_evidence", f"fcop_node: frame without focal evidence: {est.reason}")
@@ -298,12 +298,15 @@ class FcopNode(Node):
         info = camera_info(win.focal, cx, cy, w, h, header)
         self.pub_info.publish(info)
         self.pub_latest.publish(info)
-        objects = est.poses_at(win.focal) if est.focal is not None else []
-        if p["publish_poses"]:
-            self.pub_poses.publish(pose_array(objects, header))
-        if p["publish_markers"]:
-            self.pub_markers.publish(marker_array(objects, header))
-        self.last = (stamp, win, est, info)
+        objects = []
+        if p["publish_poses"] or p["publish_markers"]:
+            # Poses at the window's focal length: steadier than the frame's own.
+            objects = est.poses_at(win.focal) if est.focal is not None else []
+            if p["publish_poses"]:
+                self.pub_poses.publish(pose_array(objects, header))
+            if p["publish_markers"]:
+                self.pub_markers.publish(marker_array(objects, header))
+        self.last = (stamp, win, objects, info)
         self.published += 1
         return True
 

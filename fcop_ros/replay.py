@@ -238,10 +238,10 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
 def _row(rows, info, stamp, node, summary) -> None:
     last = node.last
     win = last[1] if last is not None and last[0] == stamp else node.window.current
-    est = last[2] if last is not None and last[0] == stamp else None
+    objects = last[2] if last is not None and last[0] == stamp else []
     row = {"stamp_ns": stamp, "focal": float(info.k[0]), "cx": float(info.k[2]), "cy": float(info.k[5]),
            "support": int(win.support), "confidence": float(win.confidence),
-           "objects": len(est.objects) if est is not None else 0,
+           "objects": len(objects),
            "spread": win.spread if win.spread is not None else float("nan")}
     rows.append(row)
     summary.frames_estimated += 1

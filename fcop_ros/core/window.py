@@ -1,13 +1,14 @@
 """Sliding window of focal evidence over recent frames, with zoom (focal change) detection.
 
-Each frame contributes its triplet votes (thinned to ``votes_per_frame``) and the refinement
-statistics of its supporting objects. The window estimate stabs all votes in the window, then
-refines f over the statistics of the frames that agree with the stabbed value, so frames are
-weighted by how well they constrain f. When the last ``change_frames`` frame estimates all lie
-on the same side of the window estimate and their mean deviation is beyond both
-``change_threshold`` and four standard errors of the frames before them, the camera's focal
-length has changed: older frames are dropped so the window re-converges to the new value
-instead of averaging old and new.
+Each frame contributes its own estimate (the frame's stabbed and refined focal length), its
+support (the triplet votes that agree with it) and the refinement statistics of its supporting
+objects. The window stabs the frames' estimates, each an interval of +-noise_bound weighted by
+its support, to find the frames that agree (a noisy or wrong frame is outvoted), then refines f
+over the statistics of those frames' objects, so each frame counts by how well it constrains f.
+When the last ``change_frames`` frame estimates all lie on the same side of the window estimate
+and their mean deviation is beyond both ``change_threshold`` and four standard errors of the
+frames before them, the camera's focal length has changed: older frames are dropped so the
+window re-converges to the new value instead of averaging old and new.
 """
 from __future__ import annotations
 
@@ -25,11 +26,12 @@ from .stabbing import focal_intervals, interval_stabbing
 class WindowEstimate:
     """The window's current estimate.
 
-    focal: pixels, or None without enough evidence (``reason`` says why). support: agreeing
-    votes in the window; confidence: their share of all votes in the window (0..1); spread:
-    robust relative spread of the per-frame estimates in the window (None below 2 frames);
-    std_rel: relative standard error of the refined value; frames: frames in the window;
-    changed: True when this update detected a focal change and restarted the window.
+    focal: pixels, or None without enough evidence (``reason`` says why). support: triplet votes
+    agreeing in the frames that agree with the estimate; confidence: the support-weighted share
+    of the window's frames that agree (0..1); spread: robust relative spread of the per-frame
+    estimates (None below 2 frames); std_rel: relative standard error of the refined value
+    (optimistic for correlated noise); frames: frames in the window; changed: True when this
+    update detected a focal change and restarted the window.
     """
 
     focal: float | None
@@ -46,7 +48,7 @@ class WindowEstimate:
 class _Frame:
     stamp: float
     focal: float | None
-    votes: np.ndarray
+    support: int
     stats: ObjectStats
 
 
@@ -55,17 +57,16 @@ class FocalWindow:
 
     Args:
         max_frames: frames kept (the window length); max_age: seconds kept (None: no limit).
-        noise_bound, bound_mode: the stabbing bound, as in :func:`estimate_focal`.
-        min_frames, min_support, min_inlier_ratio: evidence needed before a focal is reported.
+        noise_bound, bound_mode: half-width of each frame's interval, as in :func:`estimate_focal`.
+        min_frames, min_support, min_confidence: evidence needed before a focal is reported.
         change_threshold (relative) and change_frames: zoom detection, see the module docstring.
-        votes_per_frame: votes kept per frame (a random subset), bounding the stabbing cost.
-        refine: refine over the window's object statistics (else the stabbed value).
+        refine: refine over the agreeing frames' object statistics (else their weighted mean).
     """
 
     def __init__(self, max_frames: int = 30, max_age: float | None = None, noise_bound: float = 0.05,
                  bound_mode: str = "relative", min_frames: int = 1, min_support: int = 30,
-                 min_inlier_ratio: float = 0.05, change_threshold: float = 0.08, change_frames: int = 3,
-                 votes_per_frame: int = 300, refine: bool = True, seed: int | None = 0):
+                 min_confidence: float = 0.0, change_threshold: float = 0.12, change_frames: int = 3,
+                 refine: bool = True):
         if max_frames < 1:
             raise ValueError("max_frames must be >= 1")
         if max_age is not None and not max_age > 0:
@@ -76,10 +77,9 @@ class FocalWindow:
         self.max_frames, self.max_age = int(max_frames), max_age
         self.noise_bound, self.bound_mode = float(noise_bound), bound_mode
         self.min_frames, self.min_support = int(min_frames), int(min_support)
-        self.min_inlier_ratio = float(min_inlier_ratio)
+        self.min_confidence = float(min_confidence)
         self.change_threshold, self.change_frames = float(change_threshold), int(change_frames)
-        self.votes_per_frame, self.refine = int(votes_per_frame), bool(refine)
-        self._rng = np.random.default_rng(seed)
+        self.refine = bool(refine)
         self._frames: deque[_Frame] = deque()
         self.current = WindowEstimate(None, reason="no frames yet")
         self.changes = 0
@@ -94,10 +94,7 @@ class FocalWindow:
 
     def add(self, estimate: FocalEstimate, stamp: float) -> WindowEstimate:
         """Add one frame's estimate taken at ``stamp`` (seconds) and return the new window estimate."""
-        votes = np.asarray(estimate.votes, dtype=np.float64)
-        if votes.size > self.votes_per_frame:
-            votes = self._rng.choice(votes, self.votes_per_frame, replace=False)
-        self._frames.append(_Frame(float(stamp), estimate.focal, votes, estimate.stats))
+        self._frames.append(_Frame(float(stamp), estimate.focal, int(estimate.inlier_count), estimate.stats))
         while len(self._frames) > self.max_frames:
             self._frames.popleft()
         if self.max_age is not None:
@@ -144,28 +141,31 @@ class FocalWindow:
         n = len(frames)
         if n < self.min_frames:
             return WindowEstimate(None, frames=n, reason=f"{n} of {self.min_frames} frames")
-        votes = np.concatenate([f.votes for f in frames]) if frames else np.zeros(0)
-        if votes.size == 0:
-            return WindowEstimate(None, frames=n, reason="no votes in the window")
-        lo, hi, back = focal_intervals(votes, self.noise_bound, self.bound_mode)
-        st = interval_stabbing(lo, hi)
-        support = int(st.inliers.sum())
-        ratio = support / votes.size
-        if support < self.min_support or ratio < self.min_inlier_ratio:
-            return WindowEstimate(None, support, ratio, frames=n,
-                                  reason=f"too little consensus: {support} votes ({ratio:.1%})")
-        f0 = float(back(st.point))
+        rated = [f for f in frames if f.focal is not None]
+        if not rated:
+            return WindowEstimate(None, frames=n, reason="no frame with focal evidence in the window")
+        focals = np.array([f.focal for f in rated])
+        weights = np.array([max(f.support, 1) for f in rated], dtype=np.float64)
+        lo, hi, back = focal_intervals(focals, self.noise_bound, self.bound_mode)
+        st = interval_stabbing(lo, hi, weights)
+        agree = [f for f, ok in zip(rated, st.inliers) if ok]
+        support = int(sum(f.support for f in agree))
+        confidence = float(st.count / (weights.sum() + sum(1.0 for f in frames if f.focal is None)))
+        if support < self.min_support or confidence < self.min_confidence:
+            return WindowEstimate(None, support, confidence, frames=n,
+                                  reason=f"too little consensus: {support} agreeing votes, confidence {confidence:.2f}")
+        w_in = weights[st.inliers]
+        f0 = float(np.exp(np.sum(w_in * np.log(focals[st.inliers])) / w_in.sum()))
         focal, std = f0, None
-        band = np.log1p(max(self.noise_bound if self.bound_mode == "relative" else self.noise_bound / f0, 1e-6))
-        agree = [f for f in frames if f.focal is not None and abs(np.log(f.focal / f0)) <= 2 * band]
-        if self.refine and agree:
+        if self.refine:
             stats = ObjectStats.concatenate([f.stats for f in agree])
             if len(stats):
-                f1, std = refine_focal(stats, f0, search=float(2 * band), grid=9, tol=1e-7)
+                band = np.log1p(self.noise_bound if self.bound_mode == "relative" else self.noise_bound / f0)
+                f1, std = refine_focal(stats, f0, search=float(2 * band), grid=7, tol=1e-7)
                 if f1 is not None:
                     focal = f1
-        spread = _robust_spread([f.focal for f in frames if f.focal is not None])
-        return WindowEstimate(focal, support, ratio, spread, std, n)
+        spread = _robust_spread([f.focal for f in rated])
+        return WindowEstimate(focal, support, confidence, spread, std, n)
 
 
 def _robust_spread(focals) -> float | None:
