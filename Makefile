@@ -27,8 +27,15 @@ test-all:
 	$(MAKE) test ROS=kilted
 	$(MAKE) test ROS=jazzy
 
+# The figures of docs/BENCHMARKS.md (several minutes; P4Pf needs the [bench] extra: pycolmap).
 bench: $(STAMP)
+	$(VENV)/bin/pip install -q -e '.[$(ROS),test,bench]'
 	$(PY) bench/bench_core.py
+	$(PY) bench/bench_node.py --frames 600
+	$(PY) bench/accuracy.py --frames 60
+	$(PY) bench/window_accuracy.py
+	$(PY) bench/peers.py --frames 40
+	$(PY) bench/paper_simulation.py --out docs
 
 clean:
 	rm -rf .venv-* build install log *.egg-info

@@ -25,7 +25,7 @@ setup(
     extras_require={
         "kilted": ["ros-" + p for p in _ROS_PACKAGES],
         "jazzy": ["ros-jazzy-" + p for p in _ROS_PACKAGES],
-        "test": ["pytest", "colcon-common-extensions", "setuptools<80"],
+        "test": ["pytest", "pyyaml", "colcon-common-extensions", "setuptools<80"],
         "bench": ["pycolmap"],
     },
     zip_safe=True,
@@ -39,6 +39,7 @@ setup(
             "fcop_demo = fcop_ros.demo:main",
             "fcop_replay = fcop_ros.replay:main",
             "fcop_make_bag = fcop_ros.make_bag:main",
+            "fcop_eval_nocs = fcop_ros.nocs_eval:main",
         ],
     },
 )

@@ -1,5 +1,6 @@
 """Umeyama similarity and the pose convention."""
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from fcop_ros.core.pose import back_project, robust_umeyama, rotation_angle_deg, umeyama
@@ -43,3 +44,10 @@ def test_robust_umeyama_rejects_outliers():
     assert inl[:50].mean() < 0.1 and inl[50:].mean() > 0.9
     assert abs(s / 0.3 - 1) < 2e-3 and rotation_angle_deg(Rf, R) < 0.1
     assert np.linalg.norm(t - [0.1, -0.2, 1.0]) < 1e-3
+
+
+def test_rotation_angle_is_accurate_from_tiny_to_large_angles():
+    axis = np.array([0.3, 0.4, np.sqrt(0.75)])
+    for deg in (1e-9, 1e-4, 1.0, 90.0, 179.0):
+        R = Rotation.from_rotvec(np.radians(deg) * axis).as_matrix()
+        assert rotation_angle_deg(np.eye(3), R) == pytest.approx(deg, rel=1e-6)

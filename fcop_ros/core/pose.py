@@ -113,6 +113,7 @@ def robust_umeyama(nocs: np.ndarray, points: np.ndarray, iterations: int = 3, k:
 
 
 def rotation_angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
-    """Geodesic angle between two rotations in degrees."""
-    c = (np.trace(Ra.T @ Rb) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    """Geodesic angle between two rotations in degrees, from ||Ra - Rb||_F = 2 sqrt(2) sin(angle/2):
+    accurate for tiny angles too, unlike arccos of the trace."""
+    s = np.linalg.norm(np.asarray(Ra) - np.asarray(Rb)) / (2.0 * np.sqrt(2.0))
+    return float(np.degrees(2.0 * np.arcsin(np.clip(s, 0.0, 1.0))))

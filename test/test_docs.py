@@ -1,0 +1,27 @@
+"""The README and config/fcop.yaml describe the node as it is: every parameter, with its default."""
+import os
+import re
+
+import yaml
+
+from fcop_ros.node import PARAMETERS
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def test_config_file_sets_every_parameter_to_its_default():
+    with open(os.path.join(ROOT, "config", "fcop.yaml")) as fh:
+        params = yaml.safe_load(fh)["fcop_node"]["ros__parameters"]
+    assert set(params) == set(PARAMETERS)
+    for name, (default, _, _) in PARAMETERS.items():
+        assert params[name] == default and type(params[name]) is type(default), name
+
+
+def test_readme_parameter_table_lists_every_parameter_with_its_default():
+    text = open(os.path.join(ROOT, "README.md")).read()
+    rows = dict(re.findall(r"^\| `(\w+)` \| ([^|]+) \|", text, flags=re.M))
+    for name, (default, _, _) in PARAMETERS.items():
+        assert name in rows, name
+        shown = rows[name].strip()
+        expected = str(default).lower() if isinstance(default, bool) else str(default)
+        assert shown == expected, (name, shown, expected)
