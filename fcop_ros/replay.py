@@ -302,7 +302,7 @@ def write_report(path: Path, rows, summary: ReplaySummary) -> None:
     if rows:
         ax.legend(loc="best")
     ax.grid(alpha=0.3)
-    ax2.set_ylabel("inlier ratio")
+    ax2.set_ylabel("confidence")
     ax2.set_xlabel("time since first estimate [s]")
     ax2.set_ylim(0, 1)
     ax2.grid(alpha=0.3)
