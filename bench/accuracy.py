@@ -15,11 +15,10 @@ import time
 import numpy as np
 
 from fcop_ros import estimate_focal
+from fcop_ros.core import PAPER_FCOP_IS
 from fcop_ros.synthetic import PRESETS, apply_noise, render_scene
 
-# Taken literally: no evidence threshold either (the paper always answers).
-LITERAL = dict(bound_mode="absolute", noise_bound=5.0, refine=False, denoise_radius=0, erode_px=0, outlier_sigma=0,
-               edge_sigma=0, min_support=1, min_inlier_ratio=0.0)
+LITERAL = PAPER_FCOP_IS
 STEP1 = {**LITERAL, "bound_mode": "relative", "noise_bound": 5.0 / 600.0}
 STEP2 = {**STEP1, "erode_px": 1, "outlier_sigma": 4.0}
 STEP3 = {**STEP2, "denoise_radius": 2}

@@ -17,12 +17,12 @@ import time
 import numpy as np
 
 from fcop_ros import estimate_focal
+from fcop_ros.core import PAPER_FCOP_IS
 from fcop_ros.core.correspondences import extract_instances
 from fcop_ros.core.pose import rotation_angle_deg
 from fcop_ros.synthetic import PRESETS, apply_noise, render_scene
 
-LITERAL = dict(bound_mode="absolute", noise_bound=5.0, refine=False, denoise_radius=0, erode_px=0, outlier_sigma=0,
-               edge_sigma=0, min_support=1, min_inlier_ratio=0.0)
+LITERAL = PAPER_FCOP_IS
 
 
 def p4pf(frame, max_points=1000, seed=0):

@@ -31,6 +31,28 @@ def noisy_frame(seed: int, preset: str):
     return apply_noise(clean_frame(seed), preset, np.random.default_rng(10_000 + seed))
 
 
+# Inputs that carry no focal evidence, as (depth, nocs, mask) -> None edits in place.
+BAD_CASES = {
+    "nan_depth": lambda d, n, m: d.fill(np.nan),
+    "zero_depth": lambda d, n, m: d.fill(0.0),
+    "inf_depth": lambda d, n, m: d.fill(np.inf),
+    "empty_mask": lambda d, n, m: m.fill(0),
+    "nocs_zero": lambda d, n, m: n.fill(0.0),
+    "nocs_nan": lambda d, n, m: n.fill(np.nan),
+    "single_pixel": lambda d, n, m: (m.fill(0), m.__setitem__((200, 300), 1)),
+    "tiny_objects": lambda d, n, m: (m.fill(0), m.__setitem__((slice(100, 105), slice(100, 105)), 1)),
+    "planar": lambda d, n, m: d.fill(1.0),  # every object flat at one depth: all triplets degenerate
+}
+
+
+def corrupted(frame, case):
+    """A copy of a rendered frame with one of BAD_CASES applied."""
+    from dataclasses import replace
+    depth, nocs, mask = frame.depth.copy(), frame.nocs.copy(), frame.mask.copy()
+    BAD_CASES[case](depth, nocs, mask)
+    return replace(frame, depth=depth, nocs=nocs, mask=mask)
+
+
 @pytest.fixture
 def frames():
     return clean_frame, noisy_frame

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from conftest import clean_frame, noisy_frame
+from conftest import BAD_CASES, clean_frame, corrupted, noisy_frame
 from fcop_ros import FocalEstimate, estimate_focal
 from fcop_ros.core.pose import rotation_angle_deg
 
@@ -125,30 +125,10 @@ class TestBadInput:
         with pytest.raises(ValueError, match="focal_range"):
             estimate_focal(self.depth, self.nocs, self.mask, focal_range=(100, 10))
 
-    @pytest.mark.parametrize("case", ["nan_depth", "zero_depth", "inf_depth", "empty_mask", "nocs_zero",
-                                      "nocs_nan", "single_pixel", "tiny_objects", "planar"])
+    @pytest.mark.parametrize("case", sorted(BAD_CASES))
     def test_no_evidence_gives_none(self, case):
-        depth, nocs, mask = self.depth.copy(), self.nocs.copy(), self.mask.copy()
-        if case == "nan_depth":
-            depth[:] = np.nan
-        elif case == "zero_depth":
-            depth[:] = 0
-        elif case == "inf_depth":
-            depth[:] = np.inf
-        elif case == "empty_mask":
-            mask[:] = 0
-        elif case == "nocs_zero":
-            nocs[:] = 0
-        elif case == "nocs_nan":
-            nocs[:] = np.nan
-        elif case == "single_pixel":
-            mask[:] = 0
-            mask[200, 300] = 1
-        elif case == "tiny_objects":
-            mask[:] = 0
-            mask[100:105, 100:105] = 1
-        elif case == "planar":
-            depth[:] = 1.0  # every object flat at one depth: all triplets degenerate
+        fr = corrupted(clean_frame(0), case)
+        depth, nocs, mask = fr.depth, fr.nocs, fr.mask
         est = estimate_focal(depth, nocs, mask, seed=0)
         assert est.focal is None and est.reason
         assert est.objects == []

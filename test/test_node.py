@@ -14,7 +14,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from conftest import clean_frame
+from conftest import BAD_CASES, clean_frame, corrupted
 from fcop_ros.core.pose import rotation_angle_deg
 from fcop_ros.node import FcopNode
 from ros_helpers import Recorder, frame_messages, ros_context, spin_until, stamp_ns
@@ -232,26 +232,10 @@ def test_mixed_encodings_work(harness):
     assert abs(h.info.msgs[0].k[0] / fr.focal - 1) < 0.02
 
 
-def _bad(case, fr):
-    depth, nocs, mask = fr.depth.copy(), fr.nocs.copy(), fr.mask.copy()
-    if case == "nan_depth":
-        depth[:] = np.nan
-    elif case == "zero_depth":
-        depth[:] = 0.0
-    elif case == "empty_mask":
-        mask[:] = 0
-    elif case == "tiny_objects":
-        mask[:] = 0
-        mask[10:14, 10:14] = 1
-    elif case == "nocs_zero":
-        nocs[:] = 0.0
-    return fr.__class__(depth, nocs, mask, fr.focal, fr.principal_point, fr.objects)
-
-
-@pytest.mark.parametrize("case", ["nan_depth", "zero_depth", "empty_mask", "tiny_objects", "nocs_zero"])
+@pytest.mark.parametrize("case", sorted(BAD_CASES))
 def test_bad_content_never_publishes(harness, case):
     h = harness()
-    h.send(frame_messages(_bad(case, clean_frame(0)), T0))
+    h.send(frame_messages(corrupted(clean_frame(0), case), T0))
     assert h.settle(1)
     assert len(h.info) == 0 and h.node.rejected["no_evidence"] == 1
 

@@ -41,6 +41,12 @@ DEFAULTS = dict(
 )
 
 
+# The paper's fCOP-IS taken literally: uniform triplets on raw pixels, a 5 px bound, the
+# interval midpoint, no refinement and no evidence threshold (it always answers).
+PAPER_FCOP_IS = dict(bound_mode="absolute", noise_bound=5.0, refine=False, denoise_radius=0, erode_px=0,
+                     outlier_sigma=0, edge_sigma=0, min_support=1, min_inlier_ratio=0.0)
+
+
 @dataclass
 class FocalEstimate:
     """Result of :func:`estimate_focal`.
