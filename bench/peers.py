@@ -7,7 +7,8 @@ interval midpoint); the paper's RANSAC variant; P4Pf with LO-RANSAC and focal re
 object's 2D-NOCS correspondences (pycolmap.estimate_and_refine_absolute_pose, needs no depth),
 fused over objects by the median; the median of the triplet votes as the floor. All use the
 correspondences fcop_ros extracts (same pixels, same NOCS). Prints median / p90 focal error (%),
-median object rotation error (deg) and the share of frames with an estimate, per noise preset.
+median object rotation error (deg) and translation error (% of the distance; P4Pf has no metric
+scale without depth), the share of frames with an estimate and the time, per noise preset.
 """
 from __future__ import annotations
 
@@ -72,7 +73,8 @@ def main() -> None:
                                                            **{**LITERAL, "method": "ransac"}),
     }
     print(f"{args.frames} frames per preset, 640x480, 5 objects, f = 600 px. "
-          "Cells: median / p90 |focal error| %, median rotation error deg, frames with an estimate, ms per frame\n")
+          "Cells: median / p90 |focal error| %, median rotation error deg, median translation error % of the "
+          "distance, frames with an estimate, ms per frame\n")
     names = list(methods) + (["P4Pf LO-RANSAC + refine (pycolmap), median over objects"] if have_colmap else []) + \
         ["median of triplet votes"]
     print("| method | " + " | ".join(PRESETS) + " |")
@@ -81,12 +83,13 @@ def main() -> None:
     for preset in PRESETS:
         frames = [apply_noise(fr, preset, np.random.default_rng(1000 + k)) for k, fr in enumerate(clean)]
         for name in names:
-            errs, rot, ms = [], [], []
+            errs, rot, trans, ms = [], [], [], []
             for k, fr in enumerate(frames):
                 truth = {o.instance_id: o for o in fr.objects}
                 t0 = time.perf_counter()
+                trs = {}
                 if name.startswith("P4Pf"):
-                    f, rots = p4pf(fr, seed=k)
+                    f, rots = p4pf(fr, seed=k)  # no depth: no metric translation
                 elif name.startswith("median"):
                     est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k)
                     f, rots = (float(np.median(est.votes)) if est.votes.size else None), {}
@@ -94,14 +97,18 @@ def main() -> None:
                     est = methods[name](fr, k)
                     f = est.focal
                     rots = {o.instance_id: o.rotation for o in est.objects}
+                    trs = {o.instance_id: o.translation for o in est.objects}
                 ms.append(1000 * (time.perf_counter() - t0))
                 errs.append(np.nan if f is None else 100 * abs(f / fr.focal - 1))
                 rot += [rotation_angle_deg(R, truth[i].rotation) for i, R in rots.items() if i in truth]
+                trans += [100 * np.linalg.norm(t - truth[i].translation) / np.linalg.norm(truth[i].translation)
+                          for i, t in trs.items() if i in truth]
             e = np.array(errs)
             ok = np.isfinite(e)
             rot_text = f"{np.median(rot):.1f}°" if rot else "n/a"
-            cell = (f"{np.median(e[ok]):.2f} / {np.percentile(e[ok], 90):.2f}, {rot_text}, {ok.mean():.0%}, "
-                    f"{np.median(ms):.0f} ms") if ok.any() else "-"
+            trans_text = f"{np.median(trans):.1f}%" if trans else "n/a"
+            cell = (f"{np.median(e[ok]):.2f} / {np.percentile(e[ok], 90):.2f}, {rot_text}, {trans_text}, "
+                    f"{ok.mean():.0%}, {np.median(ms):.0f} ms") if ok.any() else "-"
             results[name].append(cell)
     for name in names:
         print(f"| {name} | " + " | ".join(results[name]) + " |")

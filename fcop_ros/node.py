@@ -214,22 +214,25 @@ class FcopNode(Node):
             resets = self.sync.stats.resets
             sets = self.sync.add(index, stamp, msg)
             new_drops = self.sync.stats.dropped - before
+            jumped = self.sync.stats.resets != resets
+            if jumped:  # before the new frames reach the worker
+                self.window.reset()
+                self.rejected["sync_time_jump_reset"] += len(self._frames)
+                self._frames.clear()
             for stamp_set, msgs in sets:
                 if len(self._frames) >= self.p["queue_size"]:
                     self._frames.popleft()
                     self.handoff_dropped += 1
-                    self.rejected["estimator_busy"] += 1
+                    self.rejected["estimator_busy"] += 1  # under self._lock here
                 self._frames.append((stamp_set, msgs))
                 self._arrivals.append(time.monotonic())
             if sets:
                 self._cv.notify()
-        if self.sync.stats.resets != resets:
+        if jumped:
             self._throttle.warn("time_jump", "fcop_node: time jumped back (looped bag?): synchroniser and "
                                              "window reset")
-            with self._lock:
-                self.window.reset()
         for reason, n in new_drops.items():
-            self.rejected["sync_" + reason] += n
+            self._reject("sync_" + reason, n)
             if reason != "time_jump_reset":
                 self._throttle.warn("sync_" + reason, f"fcop_node: dropped {n} input message(s) in the "
                                                       f"synchroniser: {reason.replace('_', ' ')}")
@@ -247,12 +250,17 @@ class FcopNode(Node):
             try:
                 self.process(stamp, msgs)
             except Exception as exc:  # the node must outlive any single bad frame
-                self.rejected["exception"] += 1
+                self._reject("exception")
                 self._throttle.warn("exception", f"fcop_node: frame {stamp} failed: {type(exc).__name__}: {exc}")
             finally:
                 with self._lock:
                     self._busy = False
                     self.processed += 1
+
+    def _reject(self, reason: str, n: int = 1) -> None:
+        """Count dropped input; the worker and the executor thread both do, diagnostics reads."""
+        with self._lock:
+            self.rejected[reason] += n
 
     def idle(self) -> bool:
         """True when no frame is waiting or being estimated (used by replay and tests)."""
@@ -269,11 +277,11 @@ class FcopNode(Node):
             nocs = nocs_from_image(nocs_msg)
             mask = mask_from_image(mask_msg)
         except ImageFormatError as exc:
-            self.rejected["bad_encoding"] += 1
+            self._reject("bad_encoding")
             self._throttle.warn("bad_encoding", f"fcop_node: rejected frame: {exc}")
             return False
         if not (depth.shape == nocs.shape[:2] == mask.shape):
-            self.rejected["size_mismatch"] += 1
+            self._reject("size_mismatch")
             self._throttle.warn("size_mismatch", f"fcop_node: rejected frame: image sizes differ: depth "
                                                  f"{depth.shape[::-1]}, nocs {nocs.shape[1::-1]}, mask {mask.shape[::-1]}")
             return False
@@ -285,13 +293,14 @@ class FcopNode(Node):
                              focal_range=(p["focal_min"], p["focal_max"]), min_object_pixels=p["min_object_pixels"],
                              poses=False, seed=int(self._rng.integers(2 ** 31)))
         if est.focal is None:
-            self.rejected["no_evidence"] += 1
+            self._reject("no_evidence")
             self._throttle.warn("no_evidence", f"fcop_node: frame without focal evidence: {est.reason}")
         with self._lock:
             win = self.window.add(est, stamp * 1e-9)
         if win.changed:
             self.get_logger().info(f"fcop_node: focal length changed (zoom?): window restarted at {win.focal}")
-        self._proc_times.append(time.perf_counter() - t0)
+        with self._lock:
+            self._proc_times.append(time.perf_counter() - t0)
         if win.focal is None:
             return False
         header = depth_msg.header
@@ -333,8 +342,11 @@ class FcopNode(Node):
         else:
             st.level, st.message = DiagnosticStatus.OK, f"focal {win.focal:.1f} px"
         now = time.monotonic()
-        rate = sum(1 for t in self._arrivals if now - t <= 5.0) / 5.0
-        times = np.array(self._proc_times) * 1000 if self._proc_times else np.zeros(1)
+        with self._lock:  # the worker thread appends to these while we read
+            arrivals = list(self._arrivals)
+            times = np.array(self._proc_times) * 1000 if self._proc_times else np.zeros(1)
+            rejected = dict(self.rejected)
+        rate = sum(1 for t in arrivals if now - t <= 5.0) / 5.0
         values = {
             "focal_px": "" if win.focal is None else f"{win.focal:.3f}",
             "confidence": f"{win.confidence:.3f}",
@@ -349,7 +361,7 @@ class FcopNode(Node):
             "processing_ms_median": f"{np.median(times):.2f}",
             "processing_ms_max": f"{np.max(times):.2f}",
         }
-        values.update({f"rejected_{k}": str(v) for k, v in sorted(self.rejected.items())})
+        values.update({f"rejected_{k}": str(v) for k, v in sorted(rejected.items())})
         st.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
