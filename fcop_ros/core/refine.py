@@ -49,10 +49,9 @@ class ObjectStats:
         return len(self.n)
 
 
-def object_stats(x: np.ndarray, d: np.ndarray, p: np.ndarray, var_d=None, n_eff=None) -> ObjectStats:
+def object_stats(x: np.ndarray, d: np.ndarray, p: np.ndarray, var_d=None) -> ObjectStats:
     """Statistics of one object's pixels: x (N,2) px from the principal point, d (N,) metres,
-    p (N,3) NOCS, var_d optional per-pixel depth noise variance (m^2) for the bias correction,
-    n_eff optional effective sample size (defaults to N)."""
+    p (N,3) NOCS, var_d optional per-pixel depth noise variance (m^2) for the bias correction."""
     y = np.column_stack([d * x[:, 0], d * x[:, 1], d])
     n = len(d)
     ones = np.full(n, 1.0 / n)
@@ -65,7 +64,7 @@ def object_stats(x: np.ndarray, d: np.ndarray, p: np.ndarray, var_d=None, n_eff=
         bias = (r * np.broadcast_to(var_d, (n,))[:, None]).T @ r / n
         cyy = cyy - _limit_bias(bias, cyy)
     vp = float(np.einsum("ij,ij->", pc, pc)) / n
-    return ObjectStats(np.array([float(n if n_eff is None else n_eff)]), cpy[None], cyy[None], np.array([vp]))
+    return ObjectStats(np.array([float(n)]), cpy[None], cyy[None], np.array([vp]))
 
 
 def _limit_bias(bias: np.ndarray, cyy: np.ndarray, max_share: float = 0.5) -> np.ndarray:

@@ -18,18 +18,6 @@ import numpy as np
 _DEGENERATE_REL_DET = 1e-10
 
 
-def pair_terms(x: np.ndarray, d: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray):
-    """Return the three coefficients of the pair constraint for index arrays a and b.
-
-    ``nocs_sq = ||p_a - p_b||^2``, ``image_sq = ||d_a x_a - d_b x_b||^2`` (px^2 m^2) and
-    ``depth_sq = (d_a - d_b)^2`` (m^2), each of shape ``a.shape``.
-    """
-    dp = p[a] - p[b]
-    y = d[a, None] * x[a] - d[b, None] * x[b]
-    dd = d[a] - d[b]
-    return (dp * dp).sum(-1), (y * y).sum(-1), dd * dd
-
-
 def solve_triplets(x: np.ndarray, d: np.ndarray, p: np.ndarray, triplets: np.ndarray):
     """Solve the minimal problem for every triplet at once.
 
