@@ -28,7 +28,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from msg_adapters import (ImageFormatError, camera_info, depth_from_image, marker_array, mask_from_image,
-                          nocs_from_image, pose_array)
+                          nocs_from_image, object_poses, pose_array)
 
 from .core import FocalWindow, estimate_focal
 from .sync import StampSynchronizer
@@ -311,10 +311,11 @@ class FcopNode(Node):
         if p["publish_poses"] or p["publish_markers"]:
             # Poses at the window's focal length: steadier than the frame's own.
             objects = est.poses_at(win.focal) if est.focal is not None else []
+            poses = object_poses(objects)  # one quaternion conversion for both messages
             if p["publish_poses"]:
-                self.pub_poses.publish(pose_array(objects, header))
+                self.pub_poses.publish(pose_array(objects, header, poses))
             if p["publish_markers"]:
-                self.pub_markers.publish(marker_array(objects, header))
+                self.pub_markers.publish(marker_array(objects, header, poses=poses))
         self.last = (stamp, win, objects, info)
         self.published += 1
         return True

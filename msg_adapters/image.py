@@ -7,7 +7,7 @@ generated message class.
 Conventions (REP-118 for depth): 32FC1/64FC1 depth in metres with NaN (or inf) invalid;
 16UC1 depth in units of ``depth_scale`` metres (default millimetres) with 0 invalid. NOCS:
 32FC3/64FC3 as is, rgb8/bgr8 as value/255 (bgr8 reversed to x,y,z), 16UC3 as value/65535.
-Masks: mono8, 8UC1, mono16, 16UC1, 32SC1 with 0 = background.
+Masks: mono8, 8UC1, mono16, 16UC1, 32SC1 with 0 = background (negative 32SC1 ids too).
 """
 from __future__ import annotations
 
@@ -83,8 +83,9 @@ def nocs_from_image(msg: Image, role: str = "nocs") -> np.ndarray:
 
 
 def mask_from_image(msg: Image, role: str = "mask") -> np.ndarray:
-    """(H,W) int32 instance ids, 0 = background."""
-    return image_to_array(msg, MASK_ENCODINGS, role).astype(np.int32, copy=False)
+    """(H,W) integer instance ids in the encoding's own type (uint8, uint16 or int32), 0 = background.
+    Unsigned ids stay unsigned: the estimator then needs no pass to clip negative values."""
+    return image_to_array(msg, MASK_ENCODINGS, role)
 
 
 def array_to_image(arr: np.ndarray, encoding: str, header=None) -> Image:

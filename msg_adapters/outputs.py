@@ -30,28 +30,36 @@ def camera_info(focal: float, cx: float, cy: float, width: int, height: int, hea
     return msg
 
 
-def _pose(rotation: np.ndarray, translation: np.ndarray) -> Pose:
-    p = Pose()
-    p.position.x, p.position.y, p.position.z = (float(v) for v in translation)
-    x, y, z, w = Rotation.from_matrix(np.asarray(rotation)).as_quat()
-    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = float(x), float(y), float(z), float(w)
-    return p
+def object_poses(objects) -> list[Pose]:
+    """geometry_msgs/Pose of each object; the quaternions in one batched conversion."""
+    if not objects:
+        return []
+    quats = Rotation.from_matrix(np.stack([np.asarray(o.rotation) for o in objects])).as_quat()
+    out = []
+    for o, (x, y, z, w) in zip(objects, quats):
+        p = Pose()
+        p.position.x, p.position.y, p.position.z = (float(v) for v in o.translation)
+        p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = float(x), float(y), float(z), float(w)
+        out.append(p)
+    return out
 
 
-def pose_array(objects, header=None) -> PoseArray:
-    """One pose per object (fcop_ros pose convention: the NOCS box centre, in the optical frame)."""
+def pose_array(objects, header=None, poses=None) -> PoseArray:
+    """One pose per object (fcop_ros pose convention: the NOCS box centre, in the optical frame).
+    ``poses``: the objects' Pose messages if already built (see :func:`marker_array`)."""
     msg = PoseArray()
     if header is not None:
         msg.header = copy.deepcopy(header)
-    msg.poses = [_pose(o.rotation, o.translation) for o in objects]
+    msg.poses = list(poses) if poses is not None else object_poses(objects)
     return msg
 
 
-def marker_array(objects, header=None, ns: str = "fcop_objects") -> MarkerArray:
+def marker_array(objects, header=None, ns: str = "fcop_objects", poses=None) -> MarkerArray:
     """A DELETEALL marker (clears the previous frame's boxes) then one CUBE per object.
 
     Each cube is the object's pose with edge scale / sqrt(3): the cube whose diagonal is the
-    object's bounding-box diagonal (one NOCS unit = ``scale`` metres)."""
+    object's bounding-box diagonal (one NOCS unit = ``scale`` metres). ``poses`` as in
+    :func:`pose_array`."""
     out = MarkerArray()
     clear = Marker()
     if header is not None:
@@ -59,7 +67,7 @@ def marker_array(objects, header=None, ns: str = "fcop_objects") -> MarkerArray:
     clear.ns = ns
     clear.action = Marker.DELETEALL
     out.markers.append(clear)
-    for o in objects:
+    for o, pose in zip(objects, poses if poses is not None else object_poses(objects)):
         m = Marker()
         if header is not None:
             m.header = copy.deepcopy(header)
@@ -67,7 +75,7 @@ def marker_array(objects, header=None, ns: str = "fcop_objects") -> MarkerArray:
         m.id = int(o.instance_id)
         m.type = Marker.CUBE
         m.action = Marker.ADD
-        m.pose = _pose(o.rotation, o.translation)
+        m.pose = pose
         edge = float(o.scale) / np.sqrt(3.0)
         m.scale.x = m.scale.y = m.scale.z = edge
         hue = (int(o.instance_id) * 0.61803) % 1.0

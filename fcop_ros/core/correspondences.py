@@ -84,7 +84,7 @@ def instance_ids(mask: np.ndarray, min_pixels: int = 1):
     if top <= 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     if top <= 1 << 20:
-        counts = np.bincount(np.clip(flat, 0, None).astype(np.int64), minlength=top + 1)
+        counts = np.bincount(flat if flat.dtype.kind == "u" else np.maximum(flat, 0), minlength=top + 1)
         ids = np.flatnonzero(counts)
         ids = ids[ids > 0]
         counts = counts[ids]
@@ -120,7 +120,17 @@ def _second_diff_sigma(img: np.ndarray, ok: np.ndarray) -> float:
     if v.size < 8:
         return 0.0
     v = _thin(v)
-    return float(_MAD * np.median(np.abs(v - np.median(v))) / np.sqrt(6.0))
+    return _MAD * _median(np.abs(v - _median(v))) / np.sqrt(6.0)
+
+
+def _median(v: np.ndarray) -> float:
+    """np.median of a 1-D array without its generic overhead (the same value)."""
+    m = v.size
+    k = m // 2
+    if m % 2:
+        return float(np.partition(v, k)[k])
+    part = np.partition(v, (k - 1, k))
+    return 0.5 * float(part[k - 1] + part[k])
 
 
 def _thin(v: np.ndarray, n: int = 600) -> np.ndarray:
@@ -207,7 +217,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         sigma_p = _second_diff_sigma(pz[..., 0] + pz[..., 1] + pz[..., 2], ok) / np.sqrt(3.0)
         # Below the floor the "noise" is surface curvature: treat the data as exact (no
         # smoothing, whose curvature bias would then dominate, and no bias correction).
-        depth_med = float(np.median(_thin(dz[ok])))
+        depth_med = float(_median(_thin(dz[ok])))
         if sigma_d < noise_floor * depth_med:
             sigma_d = 0.0
         if sigma_p < 4 * noise_floor:  # NOCS curvature is larger: an object spans ~200 px of ~1 NOCS unit
@@ -221,8 +231,8 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                 rd = np.abs(dz - md)
                 dp = pz - mp
                 rp = np.sqrt(dp[..., 0] ** 2 + dp[..., 1] ** 2 + dp[..., 2] ** 2)
-                thr_d = outlier_sigma * max(_MAD * np.median(_thin(rd[ok])), 1e-9 * depth_med)
-                thr_p = outlier_sigma * max(_MAD * np.median(_thin(rp[ok])), 1e-9)
+                thr_d = outlier_sigma * max(_MAD * _median(_thin(rd[ok])), 1e-9 * depth_med)
+                thr_p = outlier_sigma * max(_MAD * _median(_thin(rp[ok])), 1e-9)
                 ok2 = ok & (rd <= thr_d) & (rp <= thr_p)
                 if ok2.sum() >= max(min_object_pixels, 3) and not np.array_equal(ok2, ok):
                     ok = ok2
@@ -234,7 +244,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                 g = _gradient(md, ok)
                 gv = g[ok & (g > 0)]
                 if gv.size >= 8:
-                    thr_g = edge_sigma * _MAD * np.median(_thin(gv)) + noise_floor * depth_med
+                    thr_g = edge_sigma * _MAD * _median(_thin(gv)) + noise_floor * depth_med
                     ok2 = ok & (g <= thr_g)
                     if ok2.sum() >= max(min_object_pixels, 3):
                         ok = ok2

@@ -121,7 +121,7 @@ def _poses(instances, focal: float, init=None) -> list[ObjectPose]:
     for k, inst in enumerate(instances):
         pts = back_project(inst.x, inst.d, focal)
         start = None if init is None else init[k]
-        scale, R, t, inl, res = robust_umeyama(inst.p, pts, iterations=2 if start is not None else 3, init=start)
+        scale, R, t, inl, res = robust_umeyama(inst.p, pts, iterations=1 if start is not None else 3, init=start)
         if scale <= 0 or inl.sum() < 3:
             continue
         rms = float(np.sqrt(np.mean(res[inl] ** 2)))

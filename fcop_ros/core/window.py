@@ -161,7 +161,7 @@ class FocalWindow:
             stats = ObjectStats.concatenate([f.stats for f in agree])
             if len(stats):
                 band = np.log1p(self.noise_bound if self.bound_mode == "relative" else self.noise_bound / f0)
-                f1, std = refine_focal(stats, f0, search=float(2 * band), grid=7, tol=1e-7)
+                f1, std = refine_focal(stats, f0, search=float(2 * band), grid=7, tol=1e-6)
                 if f1 is not None:
                     focal = f1
         spread = _robust_spread([f.focal for f in rated])
