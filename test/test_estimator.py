@@ -88,8 +88,8 @@ def _errors(preset, seeds, **opt):
 # Bounds below are these numbers plus a margin of ~25%; tighten them when the estimator improves.
 MEASURED = {
     "mild": (0.53, 1.23, 0.80, 5.7),
-    "moderate": (1.05, 1.76, 1.62, 11.3),
-    "harsh": (2.97, 8.54, 2.63, 22.6),
+    "moderate": (1.05, 1.76, 1.63, 11.3),
+    "harsh": (2.97, 8.54, 2.64, 22.6),
 }
 
 
