@@ -305,7 +305,7 @@ class FcopNode(Node):
             return False
         header = depth_msg.header
         info = camera_info(win.focal, cx, cy, w, h, header)
-        self.pub_info.publish(info)
+        self.pub_info.publish(info)  # first: the pose work below does not delay it
         self.pub_latest.publish(info)
         objects = []
         if p["publish_poses"] or p["publish_markers"]:

@@ -87,9 +87,9 @@ def _errors(preset, seeds, **opt):
 # preset: (median focal %, p90 focal %, median rotation deg, median translation % of distance).
 # Bounds below are these numbers plus a margin of ~25%; tighten them when the estimator improves.
 MEASURED = {
-    "mild": (0.53, 1.23, 0.80, 5.7),
-    "moderate": (1.05, 1.76, 1.63, 11.3),
-    "harsh": (2.97, 8.54, 2.64, 22.6),
+    "mild": (0.53, 1.23, 0.31, 5.7),
+    "moderate": (1.05, 1.76, 0.50, 11.4),
+    "harsh": (2.97, 8.54, 1.57, 22.2),
 }
 
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .correspondences import Instance, check_images, extract_instances
-from .pose import ObjectPose, back_project, robust_umeyama, umeyama
+from .pose import ObjectPose, back_project, refine_pose_reprojection, robust_umeyama, umeyama
 from .refine import ObjectStats, object_stats, refine_focal
 from .solver import sample_triplets, solve_triplets
 from .stabbing import focal_intervals, interval_stabbing
@@ -34,6 +34,7 @@ DEFAULTS = dict(
     refine=True,                # least-squares refinement over the inlier pixels of the supporting objects
     bias_correction=True,       # remove the depth-noise bias of squared differences in the refinement
     poses=True,                 # False: leave poses to FocalEstimate.poses_at (e.g. at a window's focal)
+    pose_refinement=True,       # refine each pose's rotation and translation by the reprojection error
     method="stabbing",          # or "ransac"
     ransac_hypotheses=400,
     ransac_threshold=0.005,     # metres
@@ -79,11 +80,11 @@ class FocalEstimate:
     instances: list = field(default_factory=list, repr=False)
     inlier_masks: list | None = field(default=None, repr=False)
 
-    def poses_at(self, focal: float) -> list[ObjectPose]:
+    def poses_at(self, focal: float, reprojection: bool = True) -> list[ObjectPose]:
         """Poses of this frame's supporting objects at another focal length (e.g. a window's)."""
         if self.objects and self.focal is not None and focal == self.focal:
             return list(self.objects)
-        return _poses(self.instances, float(focal), self.inlier_masks)
+        return _poses(self.instances, float(focal), self.inlier_masks, reprojection)
 
 
 def _options(options: dict) -> dict:
@@ -115,8 +116,10 @@ def _votes(instances: list[Instance], opt: dict, rng: np.random.Generator):
     return f[ok], owner[ok]
 
 
-def _poses(instances, focal: float, init=None) -> list[ObjectPose]:
-    """Robust Umeyama pose of each instance at ``focal`` (init: starting inlier masks)."""
+def _poses(instances, focal: float, init=None, reprojection: bool = True) -> list[ObjectPose]:
+    """Robust Umeyama pose of each instance at ``focal`` (init: starting inlier masks), then,
+    with ``reprojection``, rotation and translation refined by the reprojection error of the
+    inliers (scale from the 3D fit)."""
     poses = []
     for k, inst in enumerate(instances):
         pts = back_project(inst.x, inst.d, focal)
@@ -124,6 +127,8 @@ def _poses(instances, focal: float, init=None) -> list[ObjectPose]:
         scale, R, t, inl, res = robust_umeyama(inst.p, pts, iterations=1 if start is not None else 3, init=start)
         if scale <= 0 or inl.sum() < 3:
             continue
+        if reprojection:
+            R, t = refine_pose_reprojection(inst.x[inl], inst.p[inl], focal, scale, R, t)
         rms = float(np.sqrt(np.mean(res[inl] ** 2)))
         poses.append(ObjectPose(inst.instance_id, R, t, scale, float(inl.mean()), rms, int(len(inst.d))))
     return poses
@@ -228,7 +233,8 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
         f, support, _ = _ransac(instances, opt, rng)
         if f is None:
             return FocalEstimate(None, reason="no valid RANSAC hypothesis", **base)
-        return FocalEstimate(f, inlier_count=support, focal_votes=f, objects=_poses(instances, f),
+        return FocalEstimate(f, inlier_count=support, focal_votes=f,
+                             objects=_poses(instances, f, reprojection=opt["pose_refinement"]),
                              instances=instances, **base)
 
     votes, owner = _votes(instances, opt, rng)
@@ -261,5 +267,5 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     est.focal = focal
     est.instances, est.inlier_masks = support, masks
     if opt["poses"]:
-        est.objects = _poses(support, focal, masks)
+        est.objects = _poses(support, focal, masks, opt["pose_refinement"])
     return est

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 
@@ -110,6 +111,32 @@ def robust_umeyama(nocs: np.ndarray, points: np.ndarray, iterations: int = 3, k:
             break
         inl = new
     return float(scale), R, t, inl, res
+
+
+def refine_pose_reprojection(x: np.ndarray, nocs: np.ndarray, focal: float, scale: float, R: np.ndarray,
+                             t: np.ndarray, max_points: int = 300):
+    """Refine rotation and translation by minimising the reprojection error (OpenCV's iterative
+    PnP from the given pose), keeping the metric scale.
+
+    The 3D fit puts depth noise into the rotation; in the image the pixel positions are exact and
+    only the NOCS noise is left. x (N,2) px from the principal point, nocs (N,3): inliers only,
+    thinned to ``max_points``. Returns (R, t); the input pose when the refinement fails or moves
+    implausibly far (more than 30 degrees)."""
+    step = max(1, len(x) // max_points)
+    obj = np.ascontiguousarray(scale * (np.asarray(nocs, dtype=np.float64)[::step] - 0.5))
+    img = np.ascontiguousarray(np.asarray(x, dtype=np.float64)[::step])  # OpenCV wants contiguous rows
+    if len(obj) < 6 or not scale > 0:
+        return R, t
+    K = np.array([[focal, 0.0, 0.0], [0.0, focal, 0.0], [0.0, 0.0, 1.0]])
+    rvec, _ = cv2.Rodrigues(np.asarray(R, dtype=np.float64))
+    tvec = np.asarray(t, dtype=np.float64).reshape(3, 1).copy()
+    ok, rvec, tvec = cv2.solvePnP(obj, img, K, None, rvec, tvec, useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
+    if not ok or not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
+        return R, t
+    R2, _ = cv2.Rodrigues(rvec)
+    if rotation_angle_deg(R2, R) > 30.0 or tvec[2, 0] <= 0:
+        return R, t
+    return R2, tvec.ravel()
 
 
 def rotation_angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
