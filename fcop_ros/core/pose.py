@@ -30,16 +30,23 @@ def umeyama(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None)
     src = np.asarray(src, dtype=np.float64)
     dst = np.asarray(dst, dtype=np.float64)
     if weights is None:
-        weights = np.ones(src.shape[:-1])
-    w = np.asarray(weights, dtype=np.float64)
-    wsum = w.sum(-1, keepdims=True)
-    wn = w / np.where(wsum > 0, wsum, 1.0)
-    mu_s = (wn[..., None] * src).sum(-2)
-    mu_d = (wn[..., None] * dst).sum(-2)
+        wn = np.full(src.shape[:-1], 1.0 / max(src.shape[-2], 1))
+    else:
+        w = np.asarray(weights, dtype=np.float64)
+        wsum = w.sum(-1, keepdims=True)
+        wn = w / np.where(wsum > 0, wsum, 1.0)
+    # Weighted means and products as matrix products: BLAS, much faster than reductions over
+    # an (N, 3) axis (this is the hot path of the robust fits).
+    wrow = wn[..., None, :]
+    mu_s = (wrow @ src)[..., 0, :]
+    mu_d = (wrow @ dst)[..., 0, :]
     sc = src - mu_s[..., None, :]
     dc = dst - mu_d[..., None, :]
-    cov = np.swapaxes(dc * wn[..., None], -1, -2) @ sc
-    var_s = (wn[..., None] * sc * sc).sum((-1, -2))
+    if weights is None:
+        cov = np.swapaxes(dc, -1, -2) @ sc / src.shape[-2]
+    else:
+        cov = np.swapaxes(dc * wn[..., None], -1, -2) @ sc
+    var_s = (wrow @ (sc * sc))[..., 0, :].sum(-1)
     U, S, Vt = np.linalg.svd(cov)
     sign = np.sign(np.linalg.det(U) * np.linalg.det(Vt))
     sign = np.where(sign == 0, 1.0, sign)
@@ -50,23 +57,6 @@ def umeyama(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None)
         scale = np.where(var_s > 0, (S * fix).sum(-1) / np.where(var_s > 0, var_s, 1.0), 0.0)
     t = mu_d - scale[..., None] * (R @ mu_s[..., None])[..., 0]
     return scale, R, t
-
-
-def _umeyama_one(src: np.ndarray, dst: np.ndarray):
-    """:func:`umeyama` for one unweighted point set, with 3x3 BLAS products (the hot path)."""
-    n = len(src)
-    if n < 3:
-        return 0.0, np.eye(3), np.zeros(3)
-    ones = np.full(n, 1.0 / n)
-    mu_s, mu_d = ones @ src, ones @ dst  # BLAS: much faster than .mean(0) on (n, 3)
-    sc, dc = src - mu_s, dst - mu_d
-    cov = dc.T @ sc / n
-    var_s = float(np.einsum("ij,ij->", sc, sc)) / n
-    U, S, Vt = np.linalg.svd(cov)
-    fix = np.array([1.0, 1.0, -1.0 if np.linalg.det(U) * np.linalg.det(Vt) < 0 else 1.0])
-    R = (U * fix) @ Vt
-    scale = float((S * fix).sum() / var_s) if var_s > 0 else 0.0
-    return scale, R, mu_d - scale * R @ mu_s
 
 
 @dataclass
@@ -99,7 +89,8 @@ def robust_umeyama(nocs: np.ndarray, points: np.ndarray, iterations: int = 3, k:
     src = np.asarray(nocs, dtype=np.float64) - 0.5
     inl = np.ones(len(src), dtype=bool) if init is None else init.copy()
     for it in range(max(1, iterations)):
-        scale, R, t = _umeyama_one(src[inl], points[inl])
+        scale, R, t = umeyama(src[inl], points[inl])
+        scale = float(scale)
         diff = points - (src @ (scale * R).T + t)
         res = np.sqrt(np.einsum("ij,ij->i", diff, diff))
         if it == iterations - 1:
