@@ -45,6 +45,7 @@ def main() -> None:
     from sensor_msgs.msg import CameraInfo, Image
 
     from fcop_ros.node import FcopNode
+    from msg_adapters import stamp_ns
     from fcop_ros.synthetic import apply_noise, render_scene
     from ros_helpers import frame_messages, ros_context, spin_until
 
@@ -58,10 +59,10 @@ def main() -> None:
         tester = Node("bench", context=ctx)
         pubs = [tester.create_publisher(Image, t, qos_profile_sensor_data) for t in ("depth", "nocs", "mask")]
         sent, got, depth_got = {}, {}, {}
-        tester.create_subscription(CameraInfo, "camera_info", lambda m: got.setdefault(
-            m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, time.perf_counter()), 100)
-        tester.create_subscription(Image, "depth", lambda m: depth_got.setdefault(
-            m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, time.perf_counter()), qos_profile_sensor_data)
+        tester.create_subscription(CameraInfo, "camera_info",
+                                   lambda m: got.setdefault(stamp_ns(m), time.perf_counter()), 100)
+        tester.create_subscription(Image, "depth", lambda m: depth_got.setdefault(stamp_ns(m), time.perf_counter()),
+                                   qos_profile_sensor_data)
         ex.add_node(node)
         ex.add_node(tester)
         spin_until(ex, lambda: all(p.get_subscription_count() >= 1 for p in pubs), 10)

@@ -28,7 +28,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from msg_adapters import (ImageFormatError, camera_info, depth_from_image, marker_array, mask_from_image,
-                          nocs_from_image, object_poses, pose_array)
+                          nocs_from_image, object_poses, pose_array, stamp_ns)
 
 from .core import FocalWindow, estimate_focal
 from .sync import StampSynchronizer
@@ -207,7 +207,7 @@ class FcopNode(Node):
 
     # ----- input side: cheap, never blocks on the estimator
     def _on_image(self, index: int, msg: Image) -> None:
-        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        stamp = stamp_ns(msg)
         with self._lock:
             self.received += 1
             before = Counter(self.sync.stats.dropped)

@@ -103,8 +103,13 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
+    from geometry_msgs.msg import PoseArray
+    from rclpy.qos import qos_profile_sensor_data
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import CameraInfo, Image
+    from visualization_msgs.msg import MarkerArray
+
+    from msg_adapters import stamp_ns
 
     from .node import FcopNode
 
@@ -140,7 +145,6 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
     executor = SingleThreadedExecutor(context=ctx)
     node = FcopNode(context=ctx, cli_args=_node_args(params_file, overrides, inputs))
     feeder = Node("fcop_replay", context=ctx)
-    from rclpy.qos import qos_profile_sensor_data
     pubs = {t: feeder.create_publisher(Image, t, qos_profile_sensor_data) for t in inputs.values()}
     outputs = {"camera_info": node.pub_info.topic_name, "object_poses": node.pub_poses.topic_name,
                "object_markers": node.pub_markers.topic_name}
@@ -148,8 +152,6 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
              "object_markers": "visualization_msgs/msg/MarkerArray"}
     got: dict[str, list] = {k: [] for k in outputs}
     consumed = {k: 0 for k in outputs}
-    from geometry_msgs.msg import PoseArray
-    from visualization_msgs.msg import MarkerArray
     classes = {"camera_info": CameraInfo, "object_poses": PoseArray, "object_markers": MarkerArray}
     subs = [feeder.create_subscription(classes[k], t, got[k].append, 100, raw=True) for k, t in outputs.items()]
     executor.add_node(node)
@@ -188,7 +190,7 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
                     for raw in got[key]:
                         if key == "camera_info":
                             info = deserialize_message(raw, CameraInfo)
-                            stamp = info.header.stamp.sec * 1_000_000_000 + info.header.stamp.nanosec
+                            stamp = stamp_ns(info)
                             _row(rows, info, stamp, node, summary)
                         else:
                             stamp = rows[-1]["stamp_ns"] if rows else 0
@@ -199,7 +201,7 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
                 for topic, _, raw in source.messages(list(inputs.values()) + [truth_topic] * bool(truth_topic)):
                     if topic == truth_topic:
                         info = deserialize_message(raw, CameraInfo)
-                        truth[info.header.stamp.sec * 1_000_000_000 + info.header.stamp.nanosec] = float(info.k[0])
+                        truth[stamp_ns(info)] = float(info.k[0])
                         continue
                     role = role_of[topic]
                     if role not in checked:
@@ -287,7 +289,7 @@ def write_report(path: Path, rows, summary: ReplaySummary) -> None:
         ax.fill_between(t, f * np.exp(-spread), f * np.exp(spread), color="tab:blue", alpha=0.2,
                         label="estimate ± frame spread")
         ax.plot(t, f, color="tab:blue", drawstyle="steps-post", label="fcop_node focal (window)")
-        if "focal_true" in rows[0] or any("focal_true" in r for r in rows):
+        if any("focal_true" in r for r in rows):
             tt = [ti for ti, r in zip(t, rows) if "focal_true" in r]
             ax.plot(tt, [r["focal_true"] for r in rows if "focal_true" in r], "k--", drawstyle="steps-post",
                     label="truth")
@@ -333,7 +335,7 @@ def play(bag, image_topics, *, rate: float = 1.0, loop: bool = False, context=No
     if own:
         use_large_image_profile()
         rclpy.init()
-    node = Node("fcop_player", context=context) if context is not None else Node("fcop_player")
+    node = Node("fcop_player", context=context)
     pubs = {t: node.create_publisher(Image, t, qos_depth) for t in image_topics}
     stop = stop or threading.Event()
     count = 0

@@ -10,7 +10,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import Header
 
-from msg_adapters import depth_to_image, mask_to_image, nocs_to_image
+from msg_adapters import depth_to_image, mask_to_image, nocs_to_image, stamp_ns  # noqa: F401 (re-exported)
 
 
 @contextlib.contextmanager
@@ -59,10 +59,6 @@ class Recorder:
 
     def __len__(self):
         return len(self.msgs)
-
-
-def stamp_ns(msg) -> int:
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
 
 def as_array(values) -> np.ndarray:

@@ -78,7 +78,8 @@ def check_images(depth, nocs, mask):
 
 
 def instance_ids(mask: np.ndarray, min_pixels: int = 1):
-    """Positive instance ids with at least ``min_pixels`` pixels, and their pixel counts."""
+    """Positive instance ids with at least ``min_pixels`` pixels, and their pixel counts
+    (negative values, like 0, are background)."""
     flat = mask.ravel()
     top = int(flat.max()) if flat.size else 0
     if top <= 0:
@@ -94,17 +95,17 @@ def instance_ids(mask: np.ndarray, min_pixels: int = 1):
     return ids[keep].astype(np.int64), counts[keep].astype(np.int64)
 
 
-def _bounding_boxes(mask: np.ndarray, ids: np.ndarray):
-    """(row0, row1, col0, col1) half-open bounding box of each id, in one pass over the image."""
+def _bounding_boxes(labels: np.ndarray, ids: np.ndarray):
+    """(row0, row1, col0, col1) half-open bounding box of each id, in one pass over the image;
+    ``labels`` holds no negative values."""
     if ids.max() <= 1 << 16:
-        lab = mask if mask.dtype.kind == "u" else np.maximum(mask, 0)
-        objs = ndimage.find_objects(lab, max_label=int(ids.max()))
+        objs = ndimage.find_objects(labels, max_label=int(ids.max()))
         return [(objs[i - 1][0].start, objs[i - 1][0].stop, objs[i - 1][1].start, objs[i - 1][1].stop)
                 for i in ids]
     boxes = []
     for iid in ids:
-        r = np.flatnonzero((mask == iid).any(1))
-        c = np.flatnonzero((mask == iid).any(0))
+        r = np.flatnonzero((labels == iid).any(1))
+        c = np.flatnonzero((labels == iid).any(0))
         boxes.append((r[0], r[-1] + 1, c[0], c[-1] + 1))
     return boxes
 
@@ -181,11 +182,13 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
     else:
         cx, cy = (float(v) for v in principal_point)
     rng = np.random.default_rng() if rng is None else rng
-    ids, counts = instance_ids(mask, min_object_pixels)
+    # Negative ids are background; the clipped ids viewed as unsigned need no second clip below.
+    labels = mask if mask.dtype.kind == "u" else np.maximum(mask, 0).view(np.dtype(f"u{mask.dtype.itemsize}"))
+    ids, counts = instance_ids(labels, min_object_pixels)
     out = []
     if ids.size == 0:
         return out
-    boxes = _bounding_boxes(mask, ids)
+    boxes = _bounding_boxes(labels, ids)
     for iid, npix, (r0, r1, c0, c1) in zip(ids, counts, boxes):
         pad = denoise_radius + erode_px + 1
         r0, r1, c0, c1 = max(r0 - pad, 0), min(r1 + pad, h), max(c0 - pad, 0), min(c1 + pad, w)

@@ -58,8 +58,8 @@ class FocalEstimate:
     agreeing with it. votes_per_object / inliers_per_object: {instance_id: count}.
     objects: poses of the instances with enough support (see :mod:`fcop_ros.core.pose`).
     std_rel: relative standard error from the refinement (optimistic for correlated noise).
-    votes (all valid triplet votes, focal px) and stats (refinement statistics of the supporting
-    objects) are what a sliding window accumulates.
+    votes: all valid triplet votes (focal px); stats: refinement statistics of the supporting
+    objects, which a sliding window accumulates together with focal and inlier_count.
     """
 
     focal: float | None
