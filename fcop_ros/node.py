@@ -202,7 +202,6 @@ class FcopNode(Node):
 
     def _build_window(self) -> None:
         self.window = FocalWindow(max_frames=self.p["window_frames"], max_age=self.p["window_seconds"] or None,
-                                  noise_bound=self.p["noise_bound"], bound_mode=self.p["noise_bound_mode"],
                                   min_frames=self.p["min_frames"], min_support=self.p["min_support"])
 
     # ----- input side: cheap, never blocks on the estimator
@@ -338,8 +337,8 @@ class FcopNode(Node):
         st.hardware_id = self.get_fully_qualified_name()
         if win.focal is None:
             st.level, st.message = DiagnosticStatus.WARN, f"no focal estimate yet: {win.reason}"
-        elif win.confidence < 0.2:
-            st.level, st.message = DiagnosticStatus.WARN, f"focal {win.focal:.1f} px, low confidence"
+        elif win.std_rel is None or win.std_rel > 0.05:
+            st.level, st.message = DiagnosticStatus.WARN, f"focal {win.focal:.1f} px, uncertain (std_rel {win.std_rel})"
         else:
             st.level, st.message = DiagnosticStatus.OK, f"focal {win.focal:.1f} px"
         now = time.monotonic()
@@ -350,8 +349,7 @@ class FcopNode(Node):
         rate = sum(1 for t in arrivals if now - t <= 5.0) / 5.0
         values = {
             "focal_px": "" if win.focal is None else f"{win.focal:.3f}",
-            "confidence": f"{win.confidence:.3f}",
-            "spread_rel": "" if win.spread is None else f"{win.spread:.4f}",
+            "std_rel": "" if win.std_rel is None else f"{win.std_rel:.4f}",
             "support_votes": str(win.support),
             "window_fill": f"{len(self.window)}/{self.p['window_frames']}",
             "frame_rate_hz": f"{rate:.2f}",

@@ -26,7 +26,7 @@ from .dds import use_large_image_profile
 
 IMAGE_TYPE = "sensor_msgs/msg/Image"
 INFO_TYPE = "sensor_msgs/msg/CameraInfo"
-CSV_COLUMNS = ["stamp_ns", "focal", "cx", "cy", "support", "confidence", "objects"]
+CSV_COLUMNS = ["stamp_ns", "focal", "std_rel", "cx", "cy", "support", "objects"]
 
 
 class ReplayError(RuntimeError):
@@ -242,9 +242,8 @@ def _row(rows, info, stamp, node, summary) -> None:
     win = last[1] if last is not None and last[0] == stamp else node.window.current
     objects = last[2] if last is not None and last[0] == stamp else []
     row = {"stamp_ns": stamp, "focal": float(info.k[0]), "cx": float(info.k[2]), "cy": float(info.k[5]),
-           "support": int(win.support), "confidence": float(win.confidence),
-           "objects": len(objects),
-           "spread": win.spread if win.spread is not None else float("nan")}
+           "support": int(win.support), "objects": len(objects),
+           "std_rel": win.std_rel if win.std_rel is not None else float("nan")}
     rows.append(row)
     summary.frames_estimated += 1
 
@@ -285,15 +284,15 @@ def write_report(path: Path, rows, summary: ReplaySummary) -> None:
     if rows:
         t = (np.array([r["stamp_ns"] for r in rows]) - rows[0]["stamp_ns"]) * 1e-9
         f = np.array([r["focal"] for r in rows])
-        spread = np.nan_to_num(np.array([r["spread"] for r in rows]), nan=0.0)
-        ax.fill_between(t, f * np.exp(-spread), f * np.exp(spread), color="tab:blue", alpha=0.2,
-                        label="estimate ± frame spread")
+        std = np.nan_to_num(np.array([r["std_rel"] for r in rows]), nan=0.0)
+        ax.fill_between(t, f * np.exp(-2 * std), f * np.exp(2 * std), color="tab:blue", alpha=0.2,
+                        label="estimate ± 2 std_rel")
         ax.plot(t, f, color="tab:blue", drawstyle="steps-post", label="fcop_node focal (window)")
         if any("focal_true" in r for r in rows):
             tt = [ti for ti, r in zip(t, rows) if "focal_true" in r]
             ax.plot(tt, [r["focal_true"] for r in rows if "focal_true" in r], "k--", drawstyle="steps-post",
                     label="truth")
-        ax2.plot(t, [r["confidence"] for r in rows], color="tab:green")
+        ax2.plot(t, 100 * std, color="tab:green")
     else:
         ax.text(0.5, 0.5, "no estimate was published", ha="center", va="center", transform=ax.transAxes)
     ax.set_ylabel("focal length [px]")
@@ -304,9 +303,8 @@ def write_report(path: Path, rows, summary: ReplaySummary) -> None:
     if rows:
         ax.legend(loc="best")
     ax.grid(alpha=0.3)
-    ax2.set_ylabel("confidence")
+    ax2.set_ylabel("std_rel [%]")
     ax2.set_xlabel("time since first estimate [s]")
-    ax2.set_ylim(0, 1)
     ax2.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=100)

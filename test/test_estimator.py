@@ -33,11 +33,12 @@ def test_global_depth_scale_leaves_focal_unchanged():
         base = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0)
         for k in (0.5, 1.3, 4.0):
             scaled = estimate_focal(fr.depth * k, fr.nocs, fr.mask, seed=0)
-            assert scaled.focal == pytest.approx(base.focal, rel=1e-5)
+            # Exact up to float32 rounding in the denoising filters (measured: <= 6e-5).
+            assert scaled.focal == pytest.approx(base.focal, rel=1e-4)
             assert scaled.inlier_count == base.inlier_count
             # The scale goes into the objects' metric size, and their translation scales with it.
             for a, b in zip(base.objects, scaled.objects):
-                assert b.scale == pytest.approx(k * a.scale, rel=1e-4)
+                assert b.scale == pytest.approx(k * a.scale, rel=2e-4)
 
 
 def test_additive_depth_offset_does_bias_focal():
@@ -85,11 +86,13 @@ def _errors(preset, seeds, **opt):
 
 # Measured on 40 seeded frames (seeds 0..39) with the default options, commit of this test:
 # preset: (median focal %, p90 focal %, median rotation deg, median translation % of distance).
-# Bounds below are these numbers plus a margin of ~25%; tighten them when the estimator improves.
+# Bounds below are these numbers plus a margin of ~25%. These old presets were what the
+# previous estimator was tuned on (0.53 / 1.05 / 2.97% there); the per-object fit with a depth
+# tilt trades a little here for far less bias on the randomised world (test_world_accuracy.py).
 MEASURED = {
-    "mild": (0.53, 1.23, 0.31, 5.7),
-    "moderate": (1.05, 1.76, 0.50, 11.4),
-    "harsh": (2.97, 8.54, 1.57, 22.2),
+    "mild": (0.48, 0.87, 0.21, 5.7),
+    "moderate": (1.16, 3.22, 0.51, 11.4),
+    "harsh": (3.52, 8.57, 1.60, 21.9),
 }
 
 

@@ -219,7 +219,7 @@ def test_diagnostics(harness):
     st = rec.msgs[-1].status[0]
     values = {kv.key: kv.value for kv in st.values}
     assert st.level == st.OK and abs(float(values["focal_px"]) / clean_frame(2).focal - 1) < 1e-3
-    for key in ("confidence", "window_fill", "frame_rate_hz", "sync_dropped", "processing_ms_median"):
+    for key in ("std_rel", "window_fill", "frame_rate_hz", "sync_dropped", "processing_ms_median"):
         assert key in values
 
 

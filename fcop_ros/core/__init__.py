@@ -1,12 +1,12 @@
 """The fCOP estimator as plain numpy/scipy (no rclpy): solver, stabbing, correspondences,
-frame estimate, refinement, poses and the sliding window."""
+per-object fits and their combination, frame estimate, poses and the sliding window."""
 from .correspondences import Instance, extract_instances
 from .estimator import DEFAULTS, PAPER_FCOP_IS, FocalEstimate, estimate_focal
-from .pose import ObjectPose, back_project, robust_umeyama, umeyama
+from .pose import ObjectPose, back_project, umeyama
 from .solver import sample_triplets, solve_triplets
 from .stabbing import StabbingResult, focal_intervals, interval_stabbing
 from .window import FocalWindow, WindowEstimate
 
 __all__ = ["Instance", "extract_instances", "DEFAULTS", "PAPER_FCOP_IS", "FocalEstimate", "estimate_focal", "ObjectPose",
-           "back_project", "robust_umeyama", "umeyama", "sample_triplets", "solve_triplets",
+           "back_project", "umeyama", "sample_triplets", "solve_triplets",
            "StabbingResult", "focal_intervals", "interval_stabbing", "FocalWindow", "WindowEstimate"]

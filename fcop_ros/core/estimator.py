@@ -1,9 +1,13 @@
-"""Frame-wise focal length estimate (fCOP-IS, refined) and object poses.
+"""Frame-wise focal length estimate (fCOP-IS, then a per-object maximum-likelihood fit) and poses.
 
 Pipeline: per-instance correspondences -> random triplets on every object -> minimal solver
-votes -> interval stabbing over the votes of all objects (the paper's frame-wise consistency)
--> least-squares refinement of f over the inlier pixels of the supporting objects -> a robust
-Umeyama pose per object. ``method="ransac"`` replaces stabbing by the paper's RANSAC variant.
+votes -> interval stabbing over the votes of all objects (the paper's frame-wise consistency:
+the starting focal length and the evidence threshold) -> every object's own focal length from
+a fit in which depth errors enter linearly (:mod:`.object_fit`) -> objects whose NOCS do not
+explain their shape are refused -> a random-effects combination of the objects' focal lengths
+(:mod:`.combine`), whose spread gives ``std_rel`` -> the focal range -> each object's pose at
+the combined focal length. ``method="ransac"`` replaces stabbing by the paper's RANSAC variant;
+``refine=False`` stops at the stabbed votes (the paper's method).
 """
 from __future__ import annotations
 
@@ -11,9 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .combine import random_effects
 from .correspondences import Instance, check_images, extract_instances
-from .pose import ObjectPose, back_project, refine_pose_reprojection, robust_umeyama, umeyama
-from .refine import ObjectStats, object_stats, refine_focal
+from .object_fit import fit_objects
+from .pose import ObjectPose, umeyama
 from .solver import sample_triplets, solve_triplets
 from .stabbing import focal_intervals, interval_stabbing
 
@@ -21,20 +26,26 @@ DEFAULTS = dict(
     triplets_per_object=1500,   # random triplets drawn on each object
     noise_bound=0.05,           # stabbing half-width: relative (fraction) or pixels
     bound_mode="relative",      # "relative" (log f) or "absolute" (pixels, the paper's 5 px)
-    focal_range=(50.0, 20000.0),  # votes outside are discarded (pixels)
+    focal_range=(50.0, 20000.0),  # votes outside are discarded, and no focal outside is reported (px)
     min_object_pixels=50,
     erode_px=1,
     denoise_radius=2,
     outlier_sigma=4.0,
     edge_sigma=2.0,             # drop pixels whose depth gradient exceeds this many robust sigmas (0: off)
     max_pixels=2000,
+    max_instances=64,           # the largest instances considered per frame; the rest are counted, not used
     min_support=30,             # inlier votes needed before a focal is reported
     min_inlier_ratio=0.05,
-    min_object_support=0.1,     # share of an object's votes that must agree to use it in refinement
-    refine=True,                # least-squares refinement over the inlier pixels of the supporting objects
-    bias_correction=True,       # remove the depth-noise bias of squared differences in the refinement
+    refine=True,                # per-object maximum-likelihood fit and random-effects combination
+    min_fit_quality=0.6,        # share of an object's 3D variance its NOCS must explain to count
+    unseen_depth_error=0.2,     # unmodelled depth error, relative to the fitted depth-error gradients
+    shape_error=0.1,            # per-object systematic error: shape_error * sqrt(unexplained share of its shape)
+    object_tau=0.005,           # prior between-object spread of log f beyond the terms above
+    object_tau_weight=2.0,      # that prior's weight, in objects
+    fit_pixels=600,             # pixels per object in the maximum-likelihood fit
+    depth_tilt=True,            # fit each object's local depth-error gradient as a nuisance
+    pose_max_std=0.25,          # no pose for an object whose own focal std_rel is above this
     poses=True,                 # False: leave poses to FocalEstimate.poses_at (e.g. at a window's focal)
-    pose_refinement=True,       # refine each pose's rotation and translation by the reprojection error
     method="stabbing",          # or "ransac"
     ransac_hypotheses=400,
     ransac_threshold=0.005,     # metres
@@ -45,7 +56,7 @@ DEFAULTS = dict(
 # The paper's fCOP-IS taken literally: uniform triplets on raw pixels, a 5 px bound, the
 # interval midpoint, no refinement and no evidence threshold (it always answers).
 PAPER_FCOP_IS = dict(bound_mode="absolute", noise_bound=5.0, refine=False, denoise_radius=0, erode_px=0,
-                     outlier_sigma=0, edge_sigma=0, min_support=1, min_inlier_ratio=0.0)
+                     outlier_sigma=0, edge_sigma=0, min_support=1, min_inlier_ratio=0.0, min_fit_quality=0.0)
 
 
 @dataclass
@@ -53,13 +64,15 @@ class FocalEstimate:
     """Result of :func:`estimate_focal`.
 
     focal: focal length in pixels (fx = fy), or None when the frame gives no evidence (then
-    ``reason`` says why). focal_votes: the stabbed (pre-refinement) value. interval: (lo, hi)
+    ``reason`` says why). std_rel: relative standard error of focal (from the objects' fits and
+    their disagreement). focal_votes: the stabbed value of the triplet votes. interval: (lo, hi)
     focal range in pixels of the maximal consensus region. inlier_count / inlier_ratio: votes
     agreeing with it. votes_per_object / inliers_per_object: {instance_id: count}.
-    objects: poses of the instances with enough support (see :mod:`fcop_ros.core.pose`).
-    std_rel: relative standard error from the refinement (optimistic for correlated noise).
-    votes: all valid triplet votes (focal px); stats: refinement statistics of the supporting
-    objects, which a sliding window accumulates together with focal and inlier_count.
+    object_focals: {instance_id: (focal, std_rel)} of the objects combined; rejected:
+    {instance_id: why} of instances not used; mirrored: instance ids whose NOCS fit only as a
+    reflection (channel order or axis convention); instances_skipped: instances beyond
+    ``max_instances`` (the smallest), not used; objects: poses of the combined, unmirrored
+    objects (see :mod:`fcop_ros.core.pose`); votes: all valid triplet votes (px).
     """
 
     focal: float | None
@@ -72,19 +85,21 @@ class FocalEstimate:
     std_rel: float | None = None
     votes_per_object: dict = field(default_factory=dict)
     inliers_per_object: dict = field(default_factory=dict)
+    object_focals: dict = field(default_factory=dict)
+    rejected: dict = field(default_factory=dict)
+    mirrored: list = field(default_factory=list)
     objects: list = field(default_factory=list)
     votes: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    stats: ObjectStats = field(default_factory=ObjectStats.empty)
     method: str = "stabbing"
     reason: str = ""
+    instances_skipped: int = 0
     instances: list = field(default_factory=list, repr=False)
-    inlier_masks: list | None = field(default=None, repr=False)
 
-    def poses_at(self, focal: float, reprojection: bool = True) -> list[ObjectPose]:
-        """Poses of this frame's supporting objects at another focal length (e.g. a window's)."""
+    def poses_at(self, focal: float) -> list[ObjectPose]:
+        """Poses of this frame's combined, unmirrored objects at a focal length (e.g. a window's)."""
         if self.objects and self.focal is not None and focal == self.focal:
             return list(self.objects)
-        return _poses(self.instances, float(focal), self.inlier_masks, reprojection)
+        return _poses(self.instances, float(focal))
 
 
 def _options(options: dict) -> dict:
@@ -116,42 +131,16 @@ def _votes(instances: list[Instance], opt: dict, rng: np.random.Generator):
     return f[ok], owner[ok]
 
 
-def _poses(instances, focal: float, init=None, reprojection: bool = True) -> list[ObjectPose]:
-    """Robust Umeyama pose of each instance at ``focal`` (init: starting inlier masks), then,
-    with ``reprojection``, rotation and translation refined by the reprojection error of the
-    inliers (scale from the 3D fit)."""
-    poses = []
-    for k, inst in enumerate(instances):
-        pts = back_project(inst.x, inst.d, focal)
-        start = None if init is None else init[k]
-        scale, R, t, inl, res = robust_umeyama(inst.p, pts, iterations=1 if start is not None else 3, init=start)
-        if scale <= 0 or inl.sum() < 3:
-            continue
-        if reprojection:
-            R, t = refine_pose_reprojection(inst.x[inl], inst.p[inl], focal, scale, R, t)
-        rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-        poses.append(ObjectPose(inst.instance_id, R, t, scale, float(inl.mean()), rms, int(len(inst.d))))
-    return poses
-
-
-def _refine(instances, focal0: float, opt: dict):
-    """Profile refinement on the robust inliers of each object.
-
-    Returns (focal or None, std_rel, stats, inlier masks of every instance at focal0)."""
-    stats, masks = [], []
-    for inst in instances:
-        pts = back_project(inst.x, inst.d, focal0)
-        _, _, _, inl, _ = robust_umeyama(inst.p, pts)
-        masks.append(inl)
-        if inl.sum() < max(opt["min_object_pixels"] // 2, 10):
-            continue
-        var_d = inst.var_d[inl] if opt["bias_correction"] else None
-        stats.append(object_stats(inst.x[inl], inst.d[inl], inst.p[inl], var_d))
-    st = ObjectStats.concatenate(stats)
-    search = float(np.log1p(max(3 * opt["noise_bound"] if opt["bound_mode"] == "relative"
-                                else 3 * opt["noise_bound"] / focal0, 0.05)))
-    f, std = refine_focal(st, focal0, search=search)
-    return f, std, st, masks
+def _poses(instances, focal: float, rng: np.random.Generator | None = None) -> list[ObjectPose]:
+    """Pose of each instance at ``focal``: the maximum-likelihood similarity (reprojection and
+    depth residuals), skipping instances whose NOCS fit only as a reflection."""
+    if not instances:
+        return []
+    fits = fit_objects(instances, focal, fix_focal=True, rng=rng)
+    return [ObjectPose(inst.instance_id, fits.rotation[k], fits.translation[k], float(fits.scale[k]),
+                       float(fits.inlier_ratio[k]), float(fits.sigma_depth[k]), int(len(inst.d)))
+            for k, inst in enumerate(instances)
+            if fits.ok[k] and not fits.mirrored[k] and np.linalg.det(fits.rotation[k]) > 0]
 
 
 def _ransac(instances, opt, rng):
@@ -225,21 +214,21 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     instances = extract_instances(depth, nocs, mask, pp, min_object_pixels=opt["min_object_pixels"],
                                   erode_px=opt["erode_px"], denoise_radius=opt["denoise_radius"],
                                   outlier_sigma=opt["outlier_sigma"], edge_sigma=opt["edge_sigma"],
-                                  max_pixels=opt["max_pixels"], rng=rng)
+                                  max_pixels=opt["max_pixels"], max_instances=opt["max_instances"], rng=rng)
     if not instances:
         return FocalEstimate(None, reason=f"no instance with >= {opt['min_object_pixels']} valid pixels", **base)
+    base["instances_skipped"] = getattr(instances, "skipped", 0)
 
     if opt["method"] == "ransac":
         f, support, _ = _ransac(instances, opt, rng)
         if f is None:
             return FocalEstimate(None, reason="no valid RANSAC hypothesis", **base)
-        return FocalEstimate(f, inlier_count=support, focal_votes=f,
-                             objects=_poses(instances, f, reprojection=opt["pose_refinement"]),
-                             instances=instances, **base)
+        return _finish(FocalEstimate(None, inlier_count=support, focal_votes=f, **base), f, None, instances,
+                       opt, rng)
 
     votes, owner = _votes(instances, opt, rng)
     ids = [inst.instance_id for inst in instances]
-    per_obj = {i: int((owner == k).sum()) for k, i in enumerate(ids)}
+    per_obj = dict(zip(ids, np.bincount(owner, minlength=len(ids)).tolist()))
     if votes.size == 0:
         return FocalEstimate(None, votes_per_object=per_obj, reason="no valid triplet (degenerate geometry)", **base)
     lo, hi, back = focal_intervals(votes, opt["noise_bound"], opt["bound_mode"])
@@ -248,7 +237,7 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     count = int(inl.sum())
     ratio = count / votes.size
     interval = (float(back(st.region[0])), float(back(st.region[1])))
-    inl_obj = {i: int((inl & (owner == k)).sum()) for k, i in enumerate(ids)}
+    inl_obj = dict(zip(ids, np.bincount(owner[inl], minlength=len(ids)).tolist()))
     est = FocalEstimate(None, inlier_count=count, inlier_ratio=ratio, interval=interval,
                         votes_per_object=per_obj, inliers_per_object=inl_obj, votes=votes, **base)
     if count < opt["min_support"] or ratio < opt["min_inlier_ratio"]:
@@ -256,16 +245,59 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
         return est
     f0 = float(back(st.point))
     est.focal_votes = f0
-    support = [inst for k, inst in enumerate(instances)
-               if per_obj[inst.instance_id] and inl_obj[inst.instance_id] / per_obj[inst.instance_id]
-               >= opt["min_object_support"]]
-    focal, masks = f0, None
-    if opt["refine"] and support:
-        f1, std, stats, masks = _refine(support, f0, opt)
-        if f1 is not None:
-            focal, est.std_rel, est.stats = f1, std, stats
-    est.focal = focal
-    est.instances, est.inlier_masks = support, masks
+    if not opt["refine"]:
+        return _finish(est, f0, None, instances, opt, rng)
+    support = list(instances)
+    seed = int(rng.integers(2 ** 32))
+    fits = fit_objects(support, f0, max_pixels=opt["fit_pixels"], depth_tilt=opt["depth_tilt"],
+                       rng=np.random.default_rng(seed))
+    good = fits.ok & (fits.quality >= opt["min_fit_quality"]) & np.isfinite(fits.var_log_focal)
+    for k, inst in enumerate(support):
+        if not fits.ok[k] or not np.isfinite(fits.var_log_focal[k]):
+            est.rejected[inst.instance_id] = "degenerate fit"
+        elif fits.quality[k] < opt["min_fit_quality"]:
+            est.rejected[inst.instance_id] = (f"its NOCS explain {fits.quality[k]:.0%} of its shape "
+                                              f"(< {opt['min_fit_quality']:.0%}): not the predicted category")
+    est.mirrored = [inst.instance_id for k, inst in enumerate(support) if good[k] and fits.mirrored[k]]
+    if not good.any():
+        est.reason = "no object whose NOCS explain its shape: " + "; ".join(
+            f"{i}: {why}" for i, why in est.rejected.items())
+        return est
+    # A smooth relative depth error e over an object changes its relief by about e * z, so its
+    # focal length by e * z / relief: far, flat objects say little. The fit removes the error's
+    # gradient over each object; what it cannot see (the field's curvature) is taken to be as
+    # large as the gradients it found, pooled over the frame's objects.
+    e = opt["unseen_depth_error"] * np.sqrt(np.mean(fits.tilt[good] ** 2)) if good.any() else 0.0
+    var = fits.var_log_focal + (e * fits.translation[:, 2] / np.maximum(fits.relief, 1e-9)) ** 2
+    # A NOCS map that is not this object's shape (the category prior's) errs in f about as much
+    # as it misfits the shape; a perfect map leaves only noise in the unexplained share.
+    var = var + opt["shape_error"] ** 2 * (1.0 - np.minimum(fits.quality, 1.0))
+    comb = random_effects(np.log(fits.focal[good]), var[good], opt["object_tau"], opt["object_tau_weight"])
+    if comb is None:
+        est.reason = "no finite per-object estimate"
+        return est
+    kept = [inst for inst, g in zip(support, good) if g]
+    for k, (inst, used) in enumerate(zip(kept, comb.used)):
+        j = np.flatnonzero(good)[k]
+        if used:
+            est.object_focals[inst.instance_id] = (float(fits.focal[j]), float(np.sqrt(var[j])))
+        else:
+            est.rejected[inst.instance_id] = "its focal length disagrees with the other objects"
+    # Poses only for objects whose own focal length is informative: a flat spurious blob or a
+    # far, shallow object fits a similarity of almost any shape.
+    used = [inst for inst, u in zip(kept, comb.used)
+            if u and est.object_focals[inst.instance_id][1] <= opt["pose_max_std"]]
+    return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var)), used, opt, rng)
+
+
+def _finish(est: FocalEstimate, focal: float, std_rel, instances, opt: dict, rng) -> FocalEstimate:
+    """Enforce the focal range, then attach the poses of the objects that made the estimate."""
+    lo, hi = opt["focal_range"]
+    if not lo <= focal <= hi:
+        est.reason = f"focal {focal:.1f} px outside focal_range [{lo:g}, {hi:g}]"
+        return est
+    est.focal, est.std_rel, est.instances = focal, std_rel, list(instances)
     if opt["poses"]:
-        est.objects = _poses(support, focal, masks, opt["pose_refinement"])
+        mirrored = set(est.mirrored)
+        est.objects = [p for p in _poses(est.instances, focal, rng) if p.instance_id not in mirrored]
     return est

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 
@@ -75,59 +74,6 @@ class ObjectPose:
     inlier_ratio: float
     rms: float
     pixels: int
-
-
-def robust_umeyama(nocs: np.ndarray, points: np.ndarray, iterations: int = 3, k: float = 3.0,
-                   floor_rel: float = 1e-4, init: np.ndarray | None = None):
-    """Umeyama fit with iterative rejection of residuals above k robust sigmas.
-
-    nocs (N,3) in [0,1], points (N,3) camera-frame metres, init an optional starting inlier mask.
-    Returns (scale, R, t, inlier mask, residuals) where the pose is fitted on the returned
-    inliers. The threshold never drops below ``floor_rel`` times the fitted scale so that
-    noise-free data keeps all its points.
-    """
-    src = np.asarray(nocs, dtype=np.float64) - 0.5
-    inl = np.ones(len(src), dtype=bool) if init is None else init.copy()
-    for it in range(max(1, iterations)):
-        scale, R, t = umeyama(src[inl], points[inl])
-        scale = float(scale)
-        diff = points - (src @ (scale * R).T + t)
-        res = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-        if it == iterations - 1:
-            break
-        med = np.median(res[inl]) if inl.any() else 0.0
-        thr = max(k * 1.4826 * med, floor_rel * abs(scale), 1e-12)
-        new = res <= thr
-        if new.sum() < 3 or np.array_equal(new, inl):
-            break
-        inl = new
-    return float(scale), R, t, inl, res
-
-
-def refine_pose_reprojection(x: np.ndarray, nocs: np.ndarray, focal: float, scale: float, R: np.ndarray,
-                             t: np.ndarray, max_points: int = 300):
-    """Refine rotation and translation by minimising the reprojection error (OpenCV's iterative
-    PnP from the given pose), keeping the metric scale.
-
-    The 3D fit puts depth noise into the rotation; in the image the pixel positions are exact and
-    only the NOCS noise is left. x (N,2) px from the principal point, nocs (N,3): inliers only,
-    thinned to ``max_points``. Returns (R, t); the input pose when the refinement fails or moves
-    implausibly far (more than 30 degrees)."""
-    step = max(1, len(x) // max_points)
-    obj = np.ascontiguousarray(scale * (np.asarray(nocs, dtype=np.float64)[::step] - 0.5))
-    img = np.ascontiguousarray(np.asarray(x, dtype=np.float64)[::step])  # OpenCV wants contiguous rows
-    if len(obj) < 6 or not scale > 0:
-        return R, t
-    K = np.array([[focal, 0.0, 0.0], [0.0, focal, 0.0], [0.0, 0.0, 1.0]])
-    rvec, _ = cv2.Rodrigues(np.asarray(R, dtype=np.float64))
-    tvec = np.asarray(t, dtype=np.float64).reshape(3, 1).copy()
-    ok, rvec, tvec = cv2.solvePnP(obj, img, K, None, rvec, tvec, useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
-    if not ok or not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
-        return R, t
-    R2, _ = cv2.Rodrigues(rvec)
-    if rotation_angle_deg(R2, R) > 30.0 or tvec[2, 0] <= 0:
-        return R, t
-    return R2, tvec.ravel()
 
 
 def rotation_angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:

@@ -1,0 +1,234 @@
+"""Per-object maximum-likelihood fit of the focal length and the object's similarity.
+
+For one object the model is  X_i = s R (p_i - 0.5) + t  (camera frame), observed as the pixel
+x_i = f X_i[:2] / X_i[2] (exact pixel centres) and the depth d_i = X_i[2]. The residuals are
+the reprojection error (pixels) and the depth error (metres), each weighted by its own noise
+level, estimated from the object's residuals. Depth errors enter linearly, so zero-mean depth
+noise does not bias the fit, unlike fits built on squared distances or on residuals measured
+in NOCS units (errors in the regressor inflate an object's relief and shorten f).
+
+R is any orthogonal matrix: the distance constraint of fCOP holds for reflections too, so a
+mirrored NOCS (a swapped channel order or a flipped axis) gives the same focal length; the fit
+reports it (``mirrored``) so that no pose is made from it.
+
+Every object is fitted on its own (its own focal length), all objects at once: the arrays are
+padded to (objects, pixels) and every step is a batched numpy operation. Gauss-Newton with a
+little Levenberg damping and Cauchy weights against outliers.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+_CAUCHY = 3.0  # robust weight 1 / (1 + (e / c)^2) of a pixel whose normalised residual is e
+
+
+@dataclass
+class ObjectFits:
+    """Per-object results, stacked over objects (O,).
+
+    focal: px (the object's own estimate, or the fixed focal); var_log_focal: variance of log f
+    from the fit's curvature (inf when fixed or degenerate); scale, rotation (O,3,3), translation
+    (O,3); quality: share of the object's 3D variance the similarity explains (1 = perfect, ~0 for
+    NOCS unrelated to the shape); mirrored: the best orthogonal fit is a reflection and explains
+    clearly more than the best rotation; sigma_px, sigma_depth: residual noise levels (px, m);
+    inlier_ratio: share of pixels with a Cauchy weight above 0.5; pixels: pixels used; ok: fit usable;
+    relief: the fitted object's depth relief (standard deviation of its model points' z, metres);
+    tilt: (O,2) the fitted relative depth-error gradient over the object (per standard deviation
+    of its image extent along x and y; zeros without ``depth_tilt``); tilt_chi2: its chi-square
+    (2 degrees of freedom) against zero.
+    """
+
+    focal: np.ndarray
+    var_log_focal: np.ndarray
+    scale: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    quality: np.ndarray
+    mirrored: np.ndarray
+    sigma_px: np.ndarray
+    sigma_depth: np.ndarray
+    inlier_ratio: np.ndarray
+    pixels: np.ndarray
+    ok: np.ndarray
+    relief: np.ndarray
+    tilt: np.ndarray
+    tilt_chi2: np.ndarray
+
+
+def _pad(instances, max_pixels: int, rng: np.random.Generator):
+    """(O, M) padded x, d, p (centred NOCS) and validity, at most ``max_pixels`` per object."""
+    m = min(max(len(i.d) for i in instances), max_pixels)
+    o = len(instances)
+    X = np.zeros((o, m, 2))
+    D = np.ones((o, m))
+    P = np.zeros((o, m, 3))
+    V = np.zeros((o, m), dtype=bool)
+    for k, inst in enumerate(instances):
+        n = len(inst.d)
+        pick = rng.choice(n, m, replace=False) if n > m else np.arange(n)
+        X[k, :len(pick)], D[k, :len(pick)], P[k, :len(pick)] = inst.x[pick], inst.d[pick], inst.p[pick] - 0.5
+        V[k, :len(pick)] = True
+    return X, D, P, V
+
+
+def _orthogonal_fit(P, Y, W):
+    """Weighted similarity Y ~ s Q P + t over orthogonal Q, batched over objects.
+
+    Returns (s, Q, t, quality, mirrored): quality = explained share of Y's variance by the best
+    orthogonal map; mirrored where that map is a reflection that explains clearly more (0.2 of
+    the variance) than the best rotation. Q is a rotation except where mirrored."""
+    wn = W / np.maximum(W.sum(1, keepdims=True), 1e-300)
+    wr = wn[:, None, :]
+    mp = (wr @ P)[:, 0]
+    my = (wr @ Y)[:, 0]
+    pc, yc = P - mp[:, None], Y - my[:, None]
+    cov = np.swapaxes(yc * wn[..., None], 1, 2) @ pc
+    vp = (wr @ (pc * pc))[:, 0].sum(-1)
+    vy = (wr @ (yc * yc))[:, 0].sum(-1)
+    U, S, Vt = np.linalg.svd(cov)
+    Q = U @ Vt
+    det = np.linalg.det(Q)
+    total = S.sum(-1)
+    proper = total - np.where(det < 0, 2 * S[:, 2], 0.0)
+    denom = np.maximum(vp * vy, 1e-300)
+    quality = total ** 2 / denom
+    quality_proper = np.maximum(proper, 0) ** 2 / denom
+    mirrored = (det < 0) & (quality - quality_proper > 0.2)
+    # A rotation unless only a reflection fits (a symmetric object fits both about as well).
+    fix = np.ones_like(S)
+    fix[:, 2] = np.where(mirrored, 1.0, np.sign(det))
+    Q = (U * fix[:, None, :]) @ Vt
+    total = np.where(mirrored, total, proper)
+    s = np.where(vp > 0, total / np.maximum(vp, 1e-300), 0.0)
+    t = my - s[:, None] * np.einsum("oij,oj->oi", Q, mp)
+    return s, Q, t, np.clip(quality, 0.0, 1.0), mirrored
+
+
+def _skew_batch(q):
+    """[q]x for q (..., 3) -> (..., 3, 3)."""
+    z = np.zeros(q.shape[:-1])
+    return np.stack([np.stack([z, -q[..., 2], q[..., 1]], -1),
+                     np.stack([q[..., 2], z, -q[..., 0]], -1),
+                     np.stack([-q[..., 1], q[..., 0], z], -1)], -2)
+
+
+def _rodrigues(w):
+    """Rotation matrices exp([w]x) for w (O,3)."""
+    th = np.linalg.norm(w, axis=-1)
+    k = w / np.where(th > 0, th, 1.0)[:, None]
+    K = _skew_batch(k)
+    s, c = np.sin(th)[:, None, None], np.cos(th)[:, None, None]
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: int = 12,
+                max_pixels: int = 600, depth_tilt: bool = True,
+                rng: np.random.Generator | None = None) -> ObjectFits:
+    """Fit every instance's focal length (or only its pose, with ``fix_focal``) and similarity.
+
+    instances: items with x (n,2) px from the principal point, d (n,) metres, p (n,3) NOCS;
+    focal0: starting focal length (px), also the fixed value with ``fix_focal``.
+    """
+    rng = np.random.default_rng(0) if rng is None else rng
+    X, D, P, V = _pad(instances, max_pixels, rng)
+    o, m = D.shape
+    Vf = V.astype(np.float64)
+    logf = np.full(o, np.log(focal0))
+    # Start: the best orthogonal similarity between NOCS and the back-projection at focal0,
+    # twice, with a robust weight from the first fit's residuals.
+    Y = np.concatenate([X * (D / focal0)[..., None], D[..., None]], axis=-1)
+    W = Vf.copy()
+    for _ in range(2):
+        s, Q, t, quality, mirrored = _orthogonal_fit(P, Y, W)
+        diff = Y - (s[:, None, None] * (P @ np.swapaxes(Q, 1, 2)) + t[:, None])
+        res = np.sqrt((diff * diff).sum(-1))
+        med = np.nanmedian(np.where(V, res, np.nan), axis=1)
+        med = np.where(np.isfinite(med), med, 0.0)
+        W = Vf / (1.0 + (res / np.maximum(_CAUCHY * 1.4826 * med, 1e-12)[:, None]) ** 2)
+    logs = np.log(np.maximum(s, 1e-12))
+    Rm = Q
+    npar = (7 if fix_focal else 8) + (2 if depth_tilt else 0)
+    # Image position over each object, centred and scaled to about +-1: the depth tilt's regressor.
+    cen = (X * Vf[..., None]).sum(1) / np.maximum(Vf.sum(1), 1)[:, None]
+    span = np.sqrt((((X - cen[:, None]) ** 2).sum(-1) * Vf).sum(1) / np.maximum(Vf.sum(1), 1))
+    U = (X - cen[:, None]) / np.maximum(span, 1e-9)[:, None, None] * Vf[..., None]
+    tilt = np.zeros((o, 2))
+    sig_px = np.full(o, 1.0)
+    sig_d = np.full(o, 1e-3)
+    w_rob = W
+    lam = 1e-6
+    H = np.zeros((o, npar, npar))
+    for it in range(iterations):
+        f = np.exp(logf)
+        q = np.exp(logs)[:, None, None] * (P @ np.swapaxes(Rm, 1, 2))
+        Xc = q + t[:, None]
+        z = np.where(np.abs(Xc[..., 2]) > 1e-9, Xc[..., 2], 1e-9)
+        uh = f[:, None] * Xc[..., 0] / z
+        vh = f[:, None] * Xc[..., 1] / z
+        gain = 1.0 + (U * tilt[:, None]).sum(-1)
+        r = np.stack([X[..., 0] - uh, X[..., 1] - vh, D - Xc[..., 2] * gain], -1)  # (O,M,3)
+        # Noise levels from the robustly weighted residuals (with floors: exact data stay finite).
+        wsum = np.maximum((w_rob * Vf).sum(1), 1e-300)
+        sig_px = np.sqrt(np.maximum(((r[..., 0] ** 2 + r[..., 1] ** 2) * w_rob).sum(1) / (2 * wsum),
+                                    (1e-6) ** 2))
+        sig_d = np.sqrt(np.maximum((r[..., 2] ** 2 * w_rob).sum(1) / wsum, (1e-7 * t[:, 2]) ** 2))
+        e = np.sqrt((r[..., 0] ** 2 + r[..., 1] ** 2) / sig_px[:, None] ** 2 / 2 + r[..., 2] ** 2 / sig_d[:, None] ** 2)
+        w_rob = Vf / (1.0 + (e / _CAUCHY) ** 2)
+        if it == iterations - 1:
+            break
+        # d(prediction)/dX rows for u, v, d; dX/d(log s, w, t) = [q, -[q]x, I].
+        A = np.zeros((o, m, 3, 3))
+        A[..., 0, 0] = f[:, None] / z
+        A[..., 0, 2] = -uh / z
+        A[..., 1, 1] = f[:, None] / z
+        A[..., 1, 2] = -vh / z
+        A[..., 2, 2] = gain
+        B = np.concatenate([q[..., None], -_skew_batch(q), np.broadcast_to(np.eye(3), (o, m, 3, 3))], -1)
+        J = A @ B  # (O,M,3,7)
+        if depth_tilt:
+            Jt = np.zeros((o, m, 3, 2))
+            Jt[..., 2, :] = z[..., None] * U
+            J = np.concatenate([J, Jt], -1)
+        if not fix_focal:
+            Jf = np.stack([uh, vh, np.zeros_like(uh)], -1)[..., None]
+            J = np.concatenate([Jf, J], -1)
+        wr = w_rob[..., None] / np.stack([sig_px, sig_px, sig_d], -1)[:, None, :] ** 2  # (O,M,3)
+        Jr = J.reshape(o, 3 * m, npar)
+        Jw = Jr * wr.reshape(o, 3 * m, 1)
+        H = np.swapaxes(Jw, 1, 2) @ Jr
+        g = (np.swapaxes(Jw, 1, 2) @ r.reshape(o, 3 * m, 1))[..., 0]
+        Hd = H + lam * np.eye(npar) * np.maximum(np.diagonal(H, axis1=1, axis2=2), 1e-12)[:, None, :]
+        try:
+            step = np.linalg.solve(Hd, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            break
+        step = np.where(np.isfinite(step), step, 0.0)
+        if not fix_focal:
+            logf = logf + np.clip(step[:, 0], -0.3, 0.3)
+            step = step[:, 1:]
+        logs = logs + np.clip(step[:, 0], -0.3, 0.3)
+        Rm = _rodrigues(np.clip(step[:, 1:4], -0.5, 0.5)) @ Rm
+        t = t + step[:, 4:7]
+        if depth_tilt:
+            tilt = tilt + np.clip(step[:, 7:9], -0.05, 0.05)
+    with np.errstate(all="ignore"):
+        try:
+            cov = np.linalg.inv(H)
+        except np.linalg.LinAlgError:
+            cov = np.full(H.shape, np.inf)
+    var = np.full(o, np.inf) if fix_focal else cov[:, 0, 0]
+    tilt_chi2 = np.zeros(o)
+    if depth_tilt:
+        ct = cov[:, -2:, -2:]
+        with np.errstate(all="ignore"):
+            tilt_chi2 = np.einsum("oi,oij,oj->o", tilt, np.linalg.pinv(ct), tilt)
+    var = np.where(np.isfinite(var) & (var > 0), var, np.inf)
+    ok = np.isfinite(logf) & np.isfinite(logs) & np.all(np.isfinite(t), -1) & (t[:, 2] > 0) & (V.sum(1) >= 6)
+    qz = q[..., 2]
+    mz = (qz * Vf).sum(1) / np.maximum(Vf.sum(1), 1)
+    relief = np.sqrt((((qz - mz[:, None]) ** 2) * Vf).sum(1) / np.maximum(Vf.sum(1), 1))
+    return ObjectFits(np.exp(logf), var, np.exp(logs), Rm, t, quality, mirrored, sig_px, sig_d,
+                      (w_rob > 0.5 * Vf).sum(1) / np.maximum(V.sum(1), 1), V.sum(1), ok, relief, tilt,
+                      np.where(np.isfinite(tilt_chi2), tilt_chi2, 0.0))
