@@ -30,6 +30,7 @@ import numpy as np
 import yaml
 
 from .bagio import BagError, BagSource, BagWriter
+from .cli import HelpFormatter
 from .config import config_path
 from .dds import use_large_image_profile
 
@@ -764,18 +765,9 @@ def play(bag, image_topics, *, rate: float = 1.0, loop: bool = False, context=No
     return result
 
 
-class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
-    """Defaults shown for every option that has one; the description and epilog kept as written."""
-
-    def _get_help_string(self, action):
-        if action.default is None or action.required:
-            return action.help
-        return super()._get_help_string(action)
-
-
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="fcop_replay", description=__doc__, epilog=exit_codes_text(),
-                                 formatter_class=_HelpFormatter)
+                                 formatter_class=HelpFormatter)
     ap.add_argument("bag", help="ROS 2 bag directory (sqlite3 or mcap)")
     ap.add_argument("--depth-topic", required=True, help="sensor_msgs/Image topic of the metric depth (required)")
     ap.add_argument("--nocs-topic", required=True, help="sensor_msgs/Image topic of the NOCS map (required)")
