@@ -200,3 +200,13 @@ def test_subprocess_exit_codes_without_traceback(bag, tmp_path):
     (tmp_path / "f").write_text("")
     r = subprocess.run(exe + args(bag, tmp_path / "f"), capture_output=True, text=True, env=env, timeout=120)
     assert r.returncode == 4 and "exists and is not a directory" in one_line(r.stderr)
+
+
+def test_the_shipped_config_applies_to_the_replayed_node():
+    """Whether config/fcop.yaml is keyed 'fcop_node:' or '/**:', replay finds every parameter in it."""
+    from fcop_ros.config import config_path
+    params = rp.node_parameters(None)
+    assert set(PARAMETERS) <= set(params)
+    for name, spec in PARAMETERS.items():
+        assert params[name] == spec[0], name
+    assert rp.load_params_file(config_path()) == params
