@@ -199,7 +199,7 @@ def main(argv=None) -> int:
                 raise FileNotFoundError(f"{what} directory not found: {d}")
         t0 = time.perf_counter()
         rows, summary = evaluate(args.dir, intr, depth_dir, nocs_dir, args.csv, not args.image_centre)
-    except (FileNotFoundError, ValueError) as exc:
+    except (OSError, ValueError) as exc:  # OSError: missing input, or a --csv that cannot be written
         print(f"fcop_eval_nocs: {exc}", file=sys.stderr)
         return 2
     print(f"{len(rows)} frames in {time.perf_counter() - t0:.1f} s; median |focal error| per scene "
