@@ -2,20 +2,26 @@
 
 Messages are serialised with rclpy (CDR, the bytes a live publisher sends), so raw bag records
 go straight into ``rclpy.serialization.deserialize_message`` or ``Publisher.publish``. Bags are
-written with metadata version 8, which the rosbag2 of Jazzy and later reads.
+written with metadata version 8, which the rosbag2 of Jazzy and later reads, optionally
+zstd-compressed the way rosbag2 does it: MCAP chunks (storage compression, what rosbag2's
+`zstd_fast`/`zstd_small` storage presets write) and per-message compression for sqlite3.
 """
 from __future__ import annotations
 
-import os
+import sqlite3
 from pathlib import Path
 
 from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import Stores, get_typestore
 
 from .dds import ros_distro
 
 STORAGES = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}
+COMPRESSIONS = ("none", "zstd")
+# zstd in the form each storage's rosbag2 plugin reads natively.
+_ZSTD_MODE = {"mcap": CompressionMode.STORAGE, "sqlite3": CompressionMode.MESSAGE}
 BAG_VERSION = 8
 
 
@@ -35,34 +41,72 @@ def type_name(msg_class) -> str:
 
 
 class BagWriter:
-    """Write rclpy messages to a new bag; topics are added on first use."""
+    """Write rclpy messages to a new bag; topics are added on first use.
 
-    def __init__(self, path, storage: str = "mcap"):
+    ``compression="zstd"`` compresses MCAP chunks or, for sqlite3, every message. A failed write
+    (disk full, read-only) raises OSError; sqlite3's own errors are turned into OSError too.
+    Leaving the ``with`` block through an exception closes the bag as far as it can without
+    raising a second exception over the first."""
+
+    def __init__(self, path, storage: str = "mcap", compression: str = "none"):
         if storage not in STORAGES:
             raise BagError(f"unknown storage {storage!r}; use one of {sorted(STORAGES)}")
+        if compression not in COMPRESSIONS:
+            raise BagError(f"unknown compression {compression!r}; use one of {list(COMPRESSIONS)}")
         path = Path(path)
         if path.exists():
             raise BagError(f"{path} exists; rosbag2 bags are directories that must not exist yet")
         self._writer = Writer(path, version=BAG_VERSION, storage_plugin=STORAGES[storage])
+        if compression == "zstd":
+            self._writer.set_compression(_ZSTD_MODE[storage], CompressionFormat.ZSTD)
         self._ts = typestore()
         self._conns = {}
+        self._open = False
         self.path = path
 
     def __enter__(self):
-        self._writer.open()
+        with _os_errors(self.path):
+            self._writer.open()
+        self._open = True
         return self
 
-    def __exit__(self, *exc):
-        self._writer.close()
+    def __exit__(self, exc_type, exc, tb):
+        if not self._open:
+            return
+        self._open = False
+        if exc_type is None:
+            with _os_errors(self.path):
+                self._writer.close()
+        else:
+            try:
+                self._writer.close()
+            except Exception:  # noqa: BLE001 - the exception in flight is the one to report
+                pass
 
     def write(self, topic: str, msg, stamp_ns: int) -> None:
         self.write_raw(topic, type_name(type(msg)), serialize_message(msg), stamp_ns)
 
     def write_raw(self, topic: str, msgtype: str, data: bytes, stamp_ns: int) -> None:
-        conn = self._conns.get(topic)
-        if conn is None:
-            conn = self._conns[topic] = self._writer.add_connection(topic, msgtype, typestore=self._ts)
-        self._writer.write(conn, int(stamp_ns), data)
+        with _os_errors(self.path):
+            conn = self._conns.get(topic)
+            if conn is None:
+                conn = self._conns[topic] = self._writer.add_connection(topic, msgtype, typestore=self._ts)
+            self._writer.write(conn, int(stamp_ns), data)
+
+
+class _os_errors:
+    """sqlite3 reports a full disk or a read-only file as its own error: make it an OSError."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is not None and issubclass(exc_type, sqlite3.Error):
+            raise OSError(f"{self.path}: {exc}") from exc
+        return False
 
 
 class BagSource:

@@ -4,23 +4,35 @@ from __future__ import annotations
 
 import argparse
 import shutil
+import sys
 import time
 from pathlib import Path
 
+from .cli import HelpFormatter
 from .make_bag import TOPICS, make_bag
 from .replay import replay
 from .synthetic import PRESETS, SequenceSpec
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="fcop_demo", description=__doc__)
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="fcop_demo", description=__doc__, formatter_class=HelpFormatter,
+                                 epilog="exit codes:\n  0   done\n  1   nothing was estimated\n"
+                                        "  2   the bag or the outputs could not be written")
     ap.add_argument("--out", default="out/demo", help="directory for the bag and the replay outputs")
-    ap.add_argument("--frames", type=int, default=60)
-    ap.add_argument("--preset", default="moderate", choices=sorted(PRESETS))
-    ap.add_argument("--focal", type=float, default=600.0)
-    ap.add_argument("--zoom-focal", type=float, default=750.0, help="focal length after the zoom at 2/3 of the frames")
-    ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args(argv)
+    ap.add_argument("--frames", type=int, default=60, help="number of frames (640x480 at 30 Hz)")
+    ap.add_argument("--preset", default="moderate", choices=sorted(PRESETS), help="noise preset")
+    ap.add_argument("--focal", type=float, default=600.0, help="true focal length before the zoom, pixels")
+    ap.add_argument("--zoom-focal", type=float, default=750.0,
+                    help="true focal length after the zoom at 2/3 of the frames, pixels")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the scene and of the node's triplet sampling")
+    return ap
+
+
+def main(argv=None) -> int:
+    from .bagio import BagError
+    from .replay import OutputError, ReplayError
+
+    args = build_parser().parse_args(argv)
     out = Path(args.out)
     bag = out / "input_bag"
     if bag.exists():
@@ -31,12 +43,24 @@ def main(argv=None) -> int:
     print(f"1/2 writing a synthetic bag: {args.frames} frames 640x480 at 30 Hz, 5 objects, noise preset "
           f"'{args.preset}', true focal {args.focal:.0f} px, zoom to {args.zoom_focal:.0f} px at frame {zoom_frame}")
     t0 = time.perf_counter()
-    make_bag(bag, spec, seed=args.seed)
-    print(f"    {bag} written in {time.perf_counter() - t0:.1f} s")
-    print("2/2 replaying it through fcop_node (in-process, over DDS)")
-    # A fixed triplet-sampling seed makes the printed figures repeatable run to run.
-    summary = replay(bag, TOPICS["depth"], TOPICS["nocs"], TOPICS["mask"], out, truth_topic=TOPICS["truth"],
-                     overrides=[f"seed:={args.seed}"])
+    bar = None
+    if sys.stderr.isatty():
+        from tqdm import tqdm
+        bar = tqdm(total=args.frames, unit="frame", desc="    writing", file=sys.stderr)
+    try:
+        make_bag(bag, spec, seed=args.seed, compression="zstd",
+                 progress=(lambda k: bar.update(k - bar.n)) if bar is not None else None)
+        if bar is not None:
+            bar.close()
+        size = sum(f.stat().st_size for f in bag.iterdir())
+        print(f"    {bag} written in {time.perf_counter() - t0:.1f} s ({size / 1e6:.0f} MB, zstd)")
+        print("2/2 replaying it through fcop_node (in-process, over DDS)")
+        # A fixed triplet-sampling seed makes the printed figures repeatable run to run.
+        summary = replay(bag, TOPICS["depth"], TOPICS["nocs"], TOPICS["mask"], out, truth_topic=TOPICS["truth"],
+                         overrides=[f"seed:={args.seed}"])
+    except (BagError, OSError, ReplayError) as exc:
+        print(f"fcop_demo: {exc}", file=sys.stderr)
+        return 2
     print(summary.text())
     print(f"report image: {out / 'report.png'}")
     return 0 if summary.frames_estimated else 1

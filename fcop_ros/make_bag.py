@@ -4,6 +4,8 @@ Topics: /camera/depth, /camera/nocs, /camera/mask (sensor_msgs/Image), the true 
 /camera/camera_info_true (sensor_msgs/CameraInfo) and the true object poses on
 /camera/object_poses_true (geometry_msgs/PoseArray, fcop_ros pose convention), all with the
 same header stamp per frame. The scene is the core library's renderer with a noise preset.
+Bags are zstd-compressed by default (MCAP chunks, or every message for sqlite3), as rosbag2
+reads them; --compression none writes them plain.
 """
 from __future__ import annotations
 
@@ -14,7 +16,8 @@ import time
 from msg_adapters import (DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS, camera_info, depth_to_image,
                           mask_to_image, nocs_to_image, pose_array)
 
-from .bagio import STORAGES, BagError, BagWriter
+from .bagio import COMPRESSIONS, STORAGES, BagError, BagWriter
+from .cli import HelpFormatter
 from .core.pose import ObjectPose
 from .synthetic import PRESETS, SequenceSpec, camera_sequence
 
@@ -25,15 +28,17 @@ FRAME_ID = "camera_optical_frame"
 
 def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0, storage: str = "mcap",
              depth_encoding: str = "32FC1", nocs_encoding: str = "32FC3", mask_encoding: str = "mono8",
-             depth_scale: float = 0.001, start_ns: int = 1_700_000_000_000_000_000, progress=None) -> int:
-    """Write the bag; returns the number of frames. Stamps start at ``start_ns``, 1/rate apart."""
+             depth_scale: float = 0.001, start_ns: int = 1_700_000_000_000_000_000, progress=None,
+             compression: str = "none") -> int:
+    """Write the bag; returns the number of frames. Stamps start at ``start_ns``, 1/rate apart.
+    ``progress(frames written)`` is called after every frame."""
     from std_msgs.msg import Header
 
     if not rate > 0:
         raise ValueError("rate must be > 0 Hz")
     step = int(round(1e9 / rate))
     n = 0
-    with BagWriter(path, storage) as bag:
+    with BagWriter(path, storage, compression) as bag:
         for k, frame in camera_sequence(spec, seed):
             stamp = start_ns + k * step
             h = Header(frame_id=FRAME_ID)
@@ -51,24 +56,35 @@ def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0, sto
     return n
 
 
+EXIT_CODES_TEXT = """exit codes:
+  0   done
+  2   unusable arguments (the bag exists, a bad size or zoom) or the bag cannot be written
+  130 interrupted (Ctrl-C); the partial bag is left behind"""
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="fcop_make_bag", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(prog="fcop_make_bag", description=__doc__, epilog=EXIT_CODES_TEXT,
+                                 formatter_class=HelpFormatter)
     ap.add_argument("out", help="bag directory to create (must not exist)")
-    ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--frames", type=int, default=60, help="number of frames")
     ap.add_argument("--rate", type=float, default=30.0, help="frames per second (stamp spacing)")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--preset", default="moderate", choices=sorted(PRESETS), help="noise preset")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the scene, its motion and its noise")
+    ap.add_argument("--preset", default="moderate", choices=sorted(PRESETS),
+                    help="noise preset imitating learned depth and NOCS predictors")
     ap.add_argument("--focal", type=float, default=600.0, help="true focal length, pixels")
-    ap.add_argument("--zoom-frame", type=int, default=None, help="frame at which the focal length changes")
-    ap.add_argument("--zoom-focal", type=float, default=None, help="focal length from --zoom-frame on")
-    ap.add_argument("--width", type=int, default=640)
-    ap.add_argument("--height", type=int, default=480)
-    ap.add_argument("--objects", type=int, default=5)
-    ap.add_argument("--storage", default="mcap", choices=sorted(STORAGES))
-    ap.add_argument("--depth-encoding", default="32FC1", choices=DEPTH_ENCODINGS)
-    ap.add_argument("--nocs-encoding", default="32FC3", choices=NOCS_ENCODINGS)
-    ap.add_argument("--mask-encoding", default="mono8", choices=MASK_ENCODINGS)
+    ap.add_argument("--zoom-frame", type=int, default=None,
+                    help="frame at which the focal length changes (with --zoom-focal; default: no zoom)")
+    ap.add_argument("--zoom-focal", type=float, default=None,
+                    help="focal length from --zoom-frame on, pixels (default: no zoom)")
+    ap.add_argument("--width", type=int, default=640, help="image width, pixels")
+    ap.add_argument("--height", type=int, default=480, help="image height, pixels")
+    ap.add_argument("--objects", type=int, default=5, help="objects in the scene")
+    ap.add_argument("--storage", default="mcap", choices=sorted(STORAGES), help="rosbag2 storage plugin")
+    ap.add_argument("--compression", default="zstd", choices=COMPRESSIONS,
+                    help="zstd: compressed MCAP chunks, or every message for sqlite3; none: plain")
+    ap.add_argument("--depth-encoding", default="32FC1", choices=DEPTH_ENCODINGS, help="depth image encoding")
+    ap.add_argument("--nocs-encoding", default="32FC3", choices=NOCS_ENCODINGS, help="NOCS image encoding")
+    ap.add_argument("--mask-encoding", default="mono8", choices=MASK_ENCODINGS, help="instance mask encoding")
     return ap
 
 
@@ -82,16 +98,26 @@ def main(argv=None) -> int:
         return 2
     spec = SequenceSpec(args.frames, args.width, args.height, args.focal, args.zoom_frame, args.zoom_focal,
                         args.preset, args.objects)
+    bar = None
+    if sys.stderr.isatty():
+        from tqdm import tqdm
+        bar = tqdm(total=args.frames, unit="frame", desc="fcop_make_bag", file=sys.stderr)
     t0 = time.perf_counter()
     try:
         n = make_bag(args.out, spec, rate=args.rate, seed=args.seed, storage=args.storage,
                      depth_encoding=args.depth_encoding, nocs_encoding=args.nocs_encoding,
-                     mask_encoding=args.mask_encoding)
-    except BagError as exc:
+                     mask_encoding=args.mask_encoding, compression=args.compression,
+                     progress=(lambda k: bar.update(k - bar.n)) if bar is not None else None)
+    except (BagError, OSError) as exc:
         print(f"fcop_make_bag: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {n} frames ({args.width}x{args.height}, preset {args.preset}, {args.storage}) to {args.out} "
-          f"in {time.perf_counter() - t0:.1f} s")
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        if bar is not None:
+            bar.close()
+    print(f"wrote {n} frames ({args.width}x{args.height}, preset {args.preset}, {args.storage}, "
+          f"compression {args.compression}) to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
 

@@ -172,17 +172,24 @@ def _median_abs(rows):
     return (float(np.median(errs)) if errs else float("nan"), len(errs), len(rows))
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="fcop_eval_nocs", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> argparse.ArgumentParser:
+    from .cli import HelpFormatter
+
+    ap = argparse.ArgumentParser(prog="fcop_eval_nocs", description=__doc__, formatter_class=HelpFormatter,
+                                 epilog="exit codes:\n  0   done\n  2   unusable input (missing directory, "
+                                        "no frame, bad --intrinsics)")
     ap.add_argument("dir", help="dataset directory (scenes of *_mask.png, *_coord.png, *_depth.png, *_meta.txt)")
-    ap.add_argument("--intrinsics", required=True, help="real275, camera25 or fx,fy,cx,cy")
+    ap.add_argument("--intrinsics", required=True, help="real275, camera25 or fx,fy,cx,cy (required)")
     ap.add_argument("--depth", default="sensor", help="'sensor' or a directory of predicted depth")
     ap.add_argument("--nocs", default="gt", help="'gt' or a directory of predicted *_coord.png")
     ap.add_argument("--csv", default="nocs_eval.csv", help="per-frame results")
     ap.add_argument("--image-centre", action="store_true",
                     help="assume the principal point at the image centre (as the paper does) instead of cx, cy")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
     try:
         intr = parse_intrinsics(args.intrinsics)
         depth_dir = None if args.depth == "sensor" else Path(args.depth)
@@ -192,7 +199,7 @@ def main(argv=None) -> int:
                 raise FileNotFoundError(f"{what} directory not found: {d}")
         t0 = time.perf_counter()
         rows, summary = evaluate(args.dir, intr, depth_dir, nocs_dir, args.csv, not args.image_centre)
-    except (FileNotFoundError, ValueError) as exc:
+    except (OSError, ValueError) as exc:  # OSError: missing input, or a --csv that cannot be written
         print(f"fcop_eval_nocs: {exc}", file=sys.stderr)
         return 2
     print(f"{len(rows)} frames in {time.perf_counter() - t0:.1f} s; median |focal error| per scene "

@@ -118,3 +118,11 @@ def test_camera25_depth_encoding(tmp_path):
     cv2.imwrite(str(path), enc)
     d = ne.load_depth(path)
     assert np.isnan(d[0, 0]) and d[0, 1] == pytest.approx(1.234) and d[0, 2] == pytest.approx(40.0)
+
+
+def test_cli_unwritable_csv_is_one_line_and_exit_2(dataset, tmp_path, capsys):
+    root, _ = dataset
+    (tmp_path / "file").write_text("")
+    assert ne.main([str(root), "--intrinsics", "real275", "--csv", str(tmp_path / "file" / "eval.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("fcop_eval_nocs: ") and "Not a directory" in err and "\n" not in err

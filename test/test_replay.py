@@ -48,7 +48,7 @@ def read_bag(path):
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_replay_outputs(tmp_path, storage):
-    bag = tiny_bag(tmp_path / "in", storage=storage)
+    bag = tiny_bag(tmp_path / "in", storage=storage, compression="zstd")  # as fcop_make_bag writes it
     s = run(bag, tmp_path / "out", out_storage=storage)
     stamps = [START + k * int(round(1e9 / 30)) for k in range(6)]
     assert s.frames_read == 6 and s.frames_estimated == 6 and not s.damaged
@@ -56,11 +56,13 @@ def test_replay_outputs(tmp_path, storage):
     assert list(rows[0]) == rp.CSV_COLUMNS + ["focal_true", "focal_error_pct"]
     assert [int(r["stamp_ns"]) for r in rows] == stamps
     for r in rows:
-        # 160x120 frames carry little evidence: the truth within the reported +-3 std_rel, which
-        # is itself below 10% (measured: errors 1-5%, std_rel 2-4%).
-        assert float(r["focal_true"]) == F and 0 < float(r["std_rel"]) < 0.1
-        assert abs(float(r["focal_error_pct"])) <= 300 * float(r["std_rel"])
+        # 160x120 frames carry little evidence: the truth within the reported +-3 std_rel.
+        assert float(r["focal_true"]) == F and abs(float(r["focal_error_pct"])) <= 300 * float(r["std_rel"])
         assert float(r["cx"]) == (W - 1) / 2 and int(r["objects"]) >= 1
+    # std_rel is the window's relative standard error, below 5% here (measured 0.6-1.4%). It need
+    # not shrink as the window fills: frames that agree closely reveal error they all share.
+    std = [float(r["std_rel"]) for r in rows]
+    assert all(0 < v < 0.05 for v in std)
     # The output bag: CameraInfo per REP-104 at the input stamps, poses and markers alongside.
     topics, msgs = read_bag(tmp_path / "out" / "fcop_output")
     assert topics == {"/fcop/camera_info": "sensor_msgs/msg/CameraInfo",
@@ -203,11 +205,11 @@ def test_play_mode_timing_and_order(tmp_path):
             sub_node.create_subscription(Image, t, lambda m, t=t: got[t].append((stamp_ns(m), time.monotonic())), 50)
         ex.add_node(sub_node)
         result = {}
-        th = threading.Thread(target=lambda: result.setdefault("n", rp.play(bag, topics, rate=2.0, context=ctx)))
+        th = threading.Thread(target=lambda: result.setdefault("r", rp.play(bag, topics, rate=2.0, context=ctx)))
         th.start()
         assert spin_until(ex, lambda: all(len(v) == 6 for v in got.values()), 30)
         th.join(10)
-        assert result["n"] == 18
+        assert result["r"].published == 18 and not result["r"].damaged
         for t in topics:
             stamps = [s for s, _ in got[t]]
             assert stamps == sorted(stamps) and len(set(stamps)) == 6
@@ -216,3 +218,75 @@ def test_play_mode_timing_and_order(tmp_path):
         # 0.5 s recorded at rate 2 is 0.25 s; a generous window, not a timing assert.
         assert 0.12 < span < 2.0
         sub_node.destroy_node()
+
+
+@pytest.mark.parametrize("key", [("/**",), ("fcop_node",), ("/**/fcop_node",), ("/camera/fcop_node",),
+                                 ("robot", "fcop_node")])
+def test_params_file_applies_whatever_the_namespace(tmp_path, key):
+    """The replayed node runs in /fcop; a file written for the user's fcop_node (at the root, under
+    a namespace, nested, or for any node) still sets its parameters, and -p comes after it."""
+    import yaml
+    bag = tiny_bag(tmp_path / "in", frames=3)
+    section = {"ros__parameters": {"publish_poses": False, "publish_markers": False, "min_frames": 2}}
+    for k in reversed(key):
+        section = {k: section}
+    pf = tmp_path / "params.yaml"
+    pf.write_text(yaml.safe_dump(section))
+    s = run(bag, tmp_path / "out", params_file=str(pf))
+    topics, msgs = read_bag(tmp_path / "out" / "fcop_output")
+    assert set(topics) == {"/fcop/camera_info"}              # no poses, no markers
+    assert s.frames_read == 3 and s.frames_estimated == 2      # the window waited for 2 frames
+    s = run(bag, tmp_path / "out2", params_file=str(pf), overrides=["min_frames:=1", "publish_poses:=true"])
+    topics, _ = read_bag(tmp_path / "out2" / "fcop_output")
+    assert set(topics) == {"/fcop/camera_info", "/fcop/object_poses"} and s.frames_estimated == 3
+
+
+def test_play_publishes_the_recorded_time_on_clock(tmp_path):
+    """--play puts the bag's time on /clock: every recorded stamp, in order, with ticks between;
+    a node with use_sim_time ends at the last recorded stamp."""
+    from rclpy.parameter import Parameter
+    from rosgraph_msgs.msg import Clock
+    bag = tiny_bag(tmp_path / "in", frames=5, rate=10.0)  # stamps 0.1 s apart
+    topics = [mb.TOPICS["depth"], mb.TOPICS["nocs"], mb.TOPICS["mask"]]
+    stamps = [START + k * 100_000_000 for k in range(5)]
+    with ros_context() as (ctx, ex):
+        listener = Node("clock_listener", context=ctx)
+        events = []
+        listener.create_subscription(Clock, "/clock", lambda m: events.append(("clock", stamp_ns_of(m.clock))), 100)
+        listener.create_subscription(Image, topics[0], lambda m: events.append(("depth", stamp_ns(m))), 100)
+        follower = Node("sim_time_follower", context=ctx, parameter_overrides=[Parameter("use_sim_time", value=True)])
+        ex.add_node(listener)
+        ex.add_node(follower)
+        result = {}
+        th = threading.Thread(target=lambda: result.setdefault("r", rp.play(bag, topics, rate=2.0, context=ctx,
+                                                                             clock_hz=50.0)))
+        th.start()
+        assert spin_until(ex, lambda: "r" in result and follower.get_clock().now().nanoseconds == stamps[-1]
+                          and sum(e[0] == "depth" for e in events) == 5, 30)
+        th.join(10)
+        clock = [t for kind, t in events if kind == "clock"]
+        assert clock == sorted(clock) and clock[0] == stamps[0] and clock[-1] == stamps[-1]
+        assert set(stamps) <= set(clock)
+        # Ticks between messages: 0.2 s of wall time per gap at 50 Hz.
+        assert len(clock) > len(stamps) and result["r"].clock == len(clock)
+        assert [t for kind, t in events if kind == "depth"] == stamps
+        follower.destroy_node()
+        listener.destroy_node()
+
+
+def stamp_ns_of(t):
+    return t.sec * 1_000_000_000 + t.nanosec
+
+
+def test_play_on_a_truncated_bag_reports_the_damage(tmp_path, capsys):
+    bag = tiny_bag(tmp_path / "in", frames=8)
+    f = next(bag.glob("*.mcap"))
+    data = f.read_bytes()
+    f.write_bytes(data[: len(data) // 2])
+    code = rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic", mb.TOPICS["nocs"],
+                    "--mask-topic", mb.TOPICS["mask"], "--play", "--rate", "50"])
+    out, err = capsys.readouterr()
+    published = int(out.split()[1])
+    assert code == 3 and 3 <= published < 24
+    assert f"fcop_replay: bag damaged ({f.name} unreadable after this point" in err
+    assert f"played the {published} messages before the damage" in err

@@ -1,0 +1,212 @@
+"""fcop_replay under bad arguments and unwritable outputs: one clear line on stderr, the
+documented exit code (2 unusable input or arguments, 4 outputs not writable), never a
+traceback; estimates.csv written as it goes, so a full disk loses only what follows."""
+import contextlib
+import csv
+import errno
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from fcop_ros import make_bag as mb
+from fcop_ros import replay as rp
+from fcop_ros.bagio import BagSource
+from fcop_ros.node import PARAMETERS
+from fcop_ros.synthetic import SequenceSpec
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory):
+    path = tmp_path_factory.mktemp("bags") / "in"
+    mb.make_bag(path, SequenceSpec(8, 160, 120, 150.0, None, None, "mild", 4), seed=3)
+    return path
+
+
+def args(bag, out, *extra):
+    return [str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic", mb.TOPICS["nocs"],
+            "--mask-topic", mb.TOPICS["mask"], "--truth-topic", mb.TOPICS["truth"], "--out", str(out), *extra]
+
+
+def one_line(err: str) -> str:
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("fcop_replay: ") and "Traceback" not in err
+    return lines[0]
+
+
+@contextlib.contextmanager
+def read_only_dir(path: Path):
+    """A directory nobody can write into, root included (permission bits, else the immutable flag)."""
+    path.mkdir()
+    path.chmod(0o555)
+    immutable = False
+    try:
+        if os.access(path, os.W_OK):  # root ignores permission bits
+            immutable = subprocess.run(["chattr", "+i", str(path)], capture_output=True).returncode == 0
+            if not immutable:
+                pytest.skip("cannot make a read-only directory on this machine")
+        yield path
+    finally:
+        if immutable:
+            subprocess.run(["chattr", "-i", str(path)], check=True)
+        path.chmod(0o755)
+
+
+@pytest.mark.parametrize("override, expected", [
+    ("window_frames:=abc", "parameter window_frames from -p must be int, got 'abc'"),
+    ("window_frames:=0", "parameter window_frames=0 from -p is outside [1, 1000]"),
+    ("window_frames:=2.5", "parameter window_frames from -p must be int, got 2.5"),
+    ("focal_min:=30000.0", "focal_min (30000.0) must be below focal_max (20000.0)"),
+    ("sync_mode:=fuzzy", "parameter sync_mode='fuzzy' from -p must be one of: exact, approximate"),
+    ("publish_poses:=maybe", "parameter publish_poses from -p must be bool, got 'maybe'"),
+    ("window_frames=3", "-p expects NAME:=VALUE, got 'window_frames=3'"),
+])
+def test_invalid_parameter_value_is_refused(bag, tmp_path, capsys, override, expected):
+    assert rp.main(args(bag, tmp_path / "o", "-p", override)) == 2
+    assert expected in one_line(capsys.readouterr().err)
+    assert not (tmp_path / "o").exists()  # refused before anything was written
+
+
+def test_misspelt_parameter_name_is_refused_with_the_known_names(bag, tmp_path, capsys):
+    assert rp.main(args(bag, tmp_path / "o", "-p", "window_frame:=3")) == 2
+    line = one_line(capsys.readouterr().err)
+    assert "unknown parameter 'window_frame' from -p (did you mean window_frames?)" in line
+    assert all(name in line for name in PARAMETERS)
+
+
+@pytest.mark.parametrize("content, expected", [
+    (None, "cannot read --params-file"),
+    ("fcop_node:\n  ros__parameters:\n    window_frames: [1\n", "is not valid YAML (line"),
+    ("- just\n- a list\n", "is not a ROS 2 parameter file"),
+    ("other_node:\n  ros__parameters:\n    window_frames: 3\n", "has no section for fcop_node (it has: other_node)"),
+    ("/**:\n  ros__parameters:\n    window_frames: -4\n", "parameter window_frames=-4 from --params-file"),
+    ("/**:\n  ros__parameters:\n    widow_frames: 4\n", "unknown parameter 'widow_frames' from --params-file"),
+    ("fcop_node:\n  window_frames: 4\n", "section 'fcop_node/window_frames' is not a mapping"),
+])
+def test_invalid_params_file_is_refused(bag, tmp_path, capsys, content, expected):
+    pf = tmp_path / "params.yaml"
+    if content is not None:
+        pf.write_text(content)
+    assert rp.main(args(bag, tmp_path / "o", "--params-file", str(pf))) == 2
+    assert expected in one_line(capsys.readouterr().err)
+
+
+def test_params_file_sections_for_any_namespace(tmp_path):
+    """Wildcard sections apply first, the node's own (any namespace, nested or not) after them,
+    then -p; sections of other nodes are ignored."""
+    pf = tmp_path / "p.yaml"
+    pf.write_text("other:\n  ros__parameters:\n    window_frames: 999\n"
+                  "/camera/fcop_node:\n  ros__parameters:\n    window_frames: 7\n    seed: 5\n"
+                  "/**:\n  ros__parameters:\n    window_frames: 9\n    min_support: 40\n    use_sim_time: false\n"
+                  "robot:\n  arm:\n    fcop_node:\n      ros__parameters:\n        min_frames: 3\n")
+    assert rp.load_params_file(pf) == {"window_frames": 7, "min_support": 40, "use_sim_time": False,
+                                       "seed": 5, "min_frames": 3}
+    params = rp.node_parameters(str(pf), ["seed:=11", "focal_min:=60", "noise_bound_mode:=absolute",
+                                          "noise_bound:=5"])
+    assert params["seed"] == 11 and params["window_frames"] == 7
+    assert params["focal_min"] == 60.0 and type(params["focal_min"]) is float  # an int for a double
+    assert params["noise_bound"] == 5.0 and params["noise_bound_mode"] == "absolute"
+    assert rp.parse_value("1e3") == 1000.0 and rp.parse_value("true") is True and rp.parse_value("x") == "x"
+
+
+def test_out_is_a_file(bag, tmp_path, capsys):
+    out = tmp_path / "o"
+    out.write_text("not a directory")
+    assert rp.main(args(bag, out)) == 4
+    assert f"--out {out} exists and is not a directory" in one_line(capsys.readouterr().err)
+    assert out.read_text() == "not a directory"
+
+
+def test_out_is_read_only(bag, tmp_path, capsys):
+    with read_only_dir(tmp_path / "ro") as out:
+        assert rp.main(args(bag, out)) == 4
+        line = one_line(capsys.readouterr().err)
+        # The first failure is the one reported (before the fix a second exception from the
+        # cleanup replaced it).
+        assert f"cannot write {out}/estimates.csv: " in line
+        assert ("Permission denied" in line or "Operation not permitted" in line)
+        assert os.listdir(out) == []
+        # Below a read-only directory --out cannot even be created.
+        assert rp.main(args(bag, out / "sub")) == 4
+        assert f"cannot write --out {out}/sub: " in one_line(capsys.readouterr().err)
+
+
+def test_disk_full_from_the_start(bag, tmp_path, capsys):
+    """/dev/full: every write fails with ENOSPC, a real device doing what a full disk does."""
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "estimates.csv").symlink_to("/dev/full")
+    assert rp.main(args(bag, out)) == 4
+    line = one_line(capsys.readouterr().err)
+    assert f"cannot write {out}/estimates.csv: No space left on device" in line
+
+
+class _FullAfter:
+    """A text file on a disk that fills up after ``lines`` lines."""
+
+    def __init__(self, fh, lines):
+        self.fh, self.left = fh, lines
+
+    def write(self, text):
+        if self.left <= 0:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        self.left -= text.count("\n")
+        return self.fh.write(text)
+
+    def flush(self):
+        self.fh.flush()
+
+    def close(self):
+        self.fh.close()
+
+
+def test_disk_full_midway_keeps_the_rows_before_and_says_what_was_lost(bag, tmp_path, capsys, monkeypatch):
+    real_open = open
+
+    def open_on_small_disk(path, mode="r", *a, **kw):
+        fh = real_open(path, mode, *a, **kw)
+        return _FullAfter(fh, 1 + 3) if Path(path).name == "estimates.csv" else fh
+
+    monkeypatch.setattr(rp, "open", open_on_small_disk, raising=False)
+    out = tmp_path / "o"
+    (out / "report.png").mkdir(parents=True)  # and the report cannot be written either
+    assert rp.main(args(bag, out)) == 4
+    line = one_line(capsys.readouterr().err)
+    assert line.startswith(f"fcop_replay: cannot write {out}/estimates.csv: No space left on device; ")
+    # The rows are written as they come: the three before the disk filled are on disk.
+    with real_open(out / "estimates.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 3 and all(abs(float(r["focal_error_pct"])) < 5 for r in rows)
+    assert "estimates.csv holds 3 of 4 estimates" in line and "stopped after 4 of 8 frames" in line
+    assert "report.png not written" in line  # the second failure is mentioned, not raised instead
+    # The output bag was closed properly, with the frames estimated before the stop.
+    src = BagSource(out / "fcop_output")
+    assert src.counts["/fcop/camera_info"] == 4
+    src.close()
+
+
+def test_subprocess_exit_codes_without_traceback(bag, tmp_path):
+    """The installed entry point, as a user runs it."""
+    exe = [sys.executable, "-m", "fcop_ros.replay"]
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    r = subprocess.run(exe + args(bag, tmp_path / "o", "-p", "window_frames:=abc"), capture_output=True,
+                       text=True, env=env, timeout=120)
+    assert r.returncode == 2 and "must be int, got 'abc'" in one_line(r.stderr)
+    (tmp_path / "f").write_text("")
+    r = subprocess.run(exe + args(bag, tmp_path / "f"), capture_output=True, text=True, env=env, timeout=120)
+    assert r.returncode == 4 and "exists and is not a directory" in one_line(r.stderr)
+
+
+def test_the_shipped_config_applies_to_the_replayed_node():
+    """Whether config/fcop.yaml is keyed 'fcop_node:' or '/**:', replay finds every parameter in it."""
+    from fcop_ros.config import config_path
+    params = rp.node_parameters(None)
+    assert set(PARAMETERS) <= set(params)
+    for name, spec in PARAMETERS.items():
+        assert params[name] == spec[0], name
+    assert rp.load_params_file(config_path()) == params
