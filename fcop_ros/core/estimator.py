@@ -37,8 +37,9 @@ DEFAULTS = dict(
     min_support=30,             # inlier votes needed before a focal is reported
     min_inlier_ratio=0.05,
     refine=True,                # per-object maximum-likelihood fit and random-effects combination
-    min_fit_quality=0.6,        # share of an object's 3D variance its NOCS must explain to count
-    unseen_depth_error=0.2,     # unmodelled depth error, relative to the fitted depth-error gradients
+    min_fit_quality=0.85,       # share of an object's 3D variance its NOCS must explain to count
+    min_nocs_spread=0.1,        # RMS spread of an object's visible NOCS (a real object's part spans the cube)
+    unseen_depth_error=0.3,     # unmodelled depth error, relative to the fitted depth-error gradients
     shape_error=0.1,            # per-object systematic error: shape_error * sqrt(unexplained share of its shape)
     object_tau=0.005,           # prior between-object spread of log f beyond the terms above
     object_tau_weight=2.0,      # that prior's weight, in objects
@@ -56,7 +57,8 @@ DEFAULTS = dict(
 # The paper's fCOP-IS taken literally: uniform triplets on raw pixels, a 5 px bound, the
 # interval midpoint, no refinement and no evidence threshold (it always answers).
 PAPER_FCOP_IS = dict(bound_mode="absolute", noise_bound=5.0, refine=False, denoise_radius=0, erode_px=0,
-                     outlier_sigma=0, edge_sigma=0, min_support=1, min_inlier_ratio=0.0, min_fit_quality=0.0)
+                     outlier_sigma=0, edge_sigma=0, min_support=1, min_inlier_ratio=0.0, min_fit_quality=0.0,
+                     min_nocs_spread=0.0)
 
 
 @dataclass
@@ -136,7 +138,7 @@ def _poses(instances, focal: float, rng: np.random.Generator | None = None) -> l
     depth residuals), skipping instances whose NOCS fit only as a reflection."""
     if not instances:
         return []
-    fits = fit_objects(instances, focal, fix_focal=True, rng=rng)
+    fits = fit_objects(instances, focal, fix_focal=True, proper=True, rng=rng)
     return [ObjectPose(inst.instance_id, fits.rotation[k], fits.translation[k], float(fits.scale[k]),
                        float(fits.inlier_ratio[k]), float(fits.sigma_depth[k]), int(len(inst.d)))
             for k, inst in enumerate(instances)
@@ -251,10 +253,15 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     seed = int(rng.integers(2 ** 32))
     fits = fit_objects(support, f0, max_pixels=opt["fit_pixels"], depth_tilt=opt["depth_tilt"],
                        rng=np.random.default_rng(seed))
-    good = fits.ok & (fits.quality >= opt["min_fit_quality"]) & np.isfinite(fits.var_log_focal)
+    spread = np.array([np.sqrt(np.mean(np.sum((i.p - i.p.mean(0)) ** 2, axis=1))) for i in support])
+    good = (fits.ok & (fits.quality >= opt["min_fit_quality"]) & np.isfinite(fits.var_log_focal)
+            & (spread >= opt["min_nocs_spread"]))
     for k, inst in enumerate(support):
         if not fits.ok[k] or not np.isfinite(fits.var_log_focal[k]):
             est.rejected[inst.instance_id] = "degenerate fit"
+        elif spread[k] < opt["min_nocs_spread"]:
+            est.rejected[inst.instance_id] = (f"its NOCS span {spread[k]:.3f} (< {opt['min_nocs_spread']}): "
+                                              "too small a piece of the category's shape")
         elif fits.quality[k] < opt["min_fit_quality"]:
             est.rejected[inst.instance_id] = (f"its NOCS explain {fits.quality[k]:.0%} of its shape "
                                               f"(< {opt['min_fit_quality']:.0%}): not the predicted category")

@@ -73,12 +73,13 @@ def _pad(instances, max_pixels: int, rng: np.random.Generator):
     return X, D, P, V
 
 
-def _orthogonal_fit(P, Y, W):
+def _orthogonal_fit(P, Y, W, proper: bool):
     """Weighted similarity Y ~ s Q P + t over orthogonal Q, batched over objects.
 
     Returns (s, Q, t, quality, mirrored): quality = explained share of Y's variance by the best
     orthogonal map; mirrored where that map is a reflection that explains clearly more (0.2 of
-    the variance) than the best rotation. Q is a rotation except where mirrored."""
+    the variance) than the best rotation. With ``proper``, Q is a rotation except where mirrored;
+    else the best orthogonal map (the focal length does not care)."""
     wn = W / np.maximum(W.sum(1, keepdims=True), 1e-300)
     wr = wn[:, None, :]
     mp = (wr @ P)[:, 0]
@@ -91,16 +92,16 @@ def _orthogonal_fit(P, Y, W):
     Q = U @ Vt
     det = np.linalg.det(Q)
     total = S.sum(-1)
-    proper = total - np.where(det < 0, 2 * S[:, 2], 0.0)
+    proper_total = total - np.where(det < 0, 2 * S[:, 2], 0.0)
     denom = np.maximum(vp * vy, 1e-300)
     quality = total ** 2 / denom
-    quality_proper = np.maximum(proper, 0) ** 2 / denom
+    quality_proper = np.maximum(proper_total, 0) ** 2 / denom
     mirrored = (det < 0) & (quality - quality_proper > 0.2)
-    # A rotation unless only a reflection fits (a symmetric object fits both about as well).
-    fix = np.ones_like(S)
-    fix[:, 2] = np.where(mirrored, 1.0, np.sign(det))
-    Q = (U * fix[:, None, :]) @ Vt
-    total = np.where(mirrored, total, proper)
+    if proper:  # a rotation unless only a reflection fits (a symmetric object fits both about as well)
+        fix = np.ones_like(S)
+        fix[:, 2] = np.where(mirrored, 1.0, np.sign(det))
+        Q = (U * fix[:, None, :]) @ Vt
+        total = np.where(mirrored, total, proper_total)
     s = np.where(vp > 0, total / np.maximum(vp, 1e-300), 0.0)
     t = my - s[:, None] * np.einsum("oij,oj->oi", Q, mp)
     return s, Q, t, np.clip(quality, 0.0, 1.0), mirrored
@@ -124,12 +125,14 @@ def _rodrigues(w):
 
 
 def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: int = 12,
-                max_pixels: int = 600, depth_tilt: bool = True,
+                max_pixels: int = 600, depth_tilt: bool = True, proper: bool = False,
                 rng: np.random.Generator | None = None) -> ObjectFits:
     """Fit every instance's focal length (or only its pose, with ``fix_focal``) and similarity.
 
     instances: items with x (n,2) px from the principal point, d (n,) metres, p (n,3) NOCS;
-    focal0: starting focal length (px), also the fixed value with ``fix_focal``.
+    focal0: starting focal length (px), also the fixed value with ``fix_focal``; proper: fit
+    rotations (for poses) rather than any orthogonal map (for the focal length) where a rotation
+    fits about as well.
     """
     rng = np.random.default_rng(0) if rng is None else rng
     X, D, P, V = _pad(instances, max_pixels, rng)
@@ -141,7 +144,7 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
     Y = np.concatenate([X * (D / focal0)[..., None], D[..., None]], axis=-1)
     W = Vf.copy()
     for _ in range(2):
-        s, Q, t, quality, mirrored = _orthogonal_fit(P, Y, W)
+        s, Q, t, quality, mirrored = _orthogonal_fit(P, Y, W, proper)
         diff = Y - (s[:, None, None] * (P @ np.swapaxes(Q, 1, 2)) + t[:, None])
         res = np.sqrt((diff * diff).sum(-1))
         med = np.nanmedian(np.where(V, res, np.nan), axis=1)

@@ -9,6 +9,10 @@ mismatch) and averaging cannot remove. So V = P + T / n: frames that disagree as
 uncertainty says make the window n times surer; frames that agree far more closely than it
 says reveal persistent error and the window stays as unsure as one frame.
 
+When the frames disagree more than their stated variances, their spread is the frame variance
+instead; and errors that drift slowly between frames (lag-one autocorrelation rho) average out
+over n (1 - rho) / (1 + rho) frames, not n.
+
 A zoom is a change point: for every split of the window into older and newer frames (at least
 ``change_frames`` newer), the difference of the two medians is compared with its standard error
 from the transient spread (persistent error cancels in the difference). When the largest
@@ -138,6 +142,11 @@ class FocalWindow:
         old = np.array([np.median(y[:c]) for c in cut])
         new = np.array([np.median(y[c:]) for c in cut])
         diff = new - old
+        # Slowly drifting errors make neighbouring frames alike: each segment holds fewer
+        # independent frames (lag-one autocorrelation of the older half, before a recent step).
+        r = y[: n // 2] - np.median(y[: n // 2])
+        rho = float(np.clip(np.sum(r[1:] * r[:-1]) / max(np.sum(r * r), 1e-300), 0.0, 0.95)) if r.size > 2 else 0.0
+        t *= (1.0 + rho) / (1.0 - rho)
         z = np.abs(diff) / np.sqrt(np.pi / 2 * (t / cut + t / (n - cut)))
         hit = (z > self.change_sigma) & (np.abs(diff) > np.log1p(self.change_threshold))
         if not hit.any():
@@ -170,12 +179,17 @@ class FocalWindow:
         mean = float(np.sum(w * y) / w.sum())
         n = y.size
         vbar = float(np.mean(v))
+        var = vbar
         if n >= 3:
-            s2 = float(np.sum((y - mean) ** 2) / (n - 1))
-            # Only a spread clearly (one standard error of a variance) below the frames' stated
-            # variance reveals persistent error.
-            transient = min(s2 + vbar * np.sqrt(2.0 / (n - 1)), vbar)
-            var = (vbar - transient) + transient / n
-        else:
-            var = vbar
+            r = y - mean
+            s2 = float(np.sum(r ** 2) / (n - 1))
+            # Frames that disagree more than they say: their spread is the frame variance. Frames
+            # that agree clearly more closely (beyond one standard error of a variance) share the
+            # rest, which no averaging removes.
+            frame_var = max(vbar, s2)
+            persistent = max(vbar - s2 - vbar * np.sqrt(2.0 / (n - 1)), 0.0)
+            # Errors that drift slowly from frame to frame average out over fewer frames.
+            rho = float(np.clip(np.sum(r[1:] * r[:-1]) / max(np.sum(r * r), 1e-300), 0.0, 0.95))
+            n_eff = max(n * (1.0 - rho) / (1.0 + rho), 1.0)
+            var = persistent + (frame_var - persistent) / n_eff
         return WindowEstimate(float(np.exp(mean)), float(np.sqrt(var)), support, n_all, n)
