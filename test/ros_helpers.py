@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import threading
 import time
 
 import numpy as np
@@ -130,3 +131,39 @@ def harness():
     for h, ctx_mgr in made:
         h.close()
         ctx_mgr.__exit__(None, None, None)
+
+
+def rotation_errors(poses_msg, markers_msg, frame) -> list:
+    """Rotation error in degrees of each published object pose against the frame's truth (the
+    markers carry the instance ids, in the order of the poses)."""
+    from scipy.spatial.transform import Rotation
+
+    from fcop_ros.core.pose import rotation_angle_deg
+    truth = {o.instance_id: o for o in frame.objects}
+    out = []
+    for pose, marker in zip(poses_msg.poses, markers_msg.markers[1:]):
+        q = pose.orientation
+        R = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+        out.append(rotation_angle_deg(R, truth[marker.id].rotation))
+    return out
+
+
+class Gate:
+    """Holds the node's estimator: once closed, every frame estimate waits until it is opened."""
+
+    def __init__(self, monkeypatch):
+        import fcop_ros.node as node_module
+        self.event = threading.Event()
+        self.event.set()
+        real = node_module.estimate_focal
+
+        def gated(*args, **kwargs):
+            self.event.wait(60)
+            return real(*args, **kwargs)
+        monkeypatch.setattr(node_module, "estimate_focal", gated)
+
+    def close(self):
+        self.event.clear()
+
+    def open(self):
+        self.event.set()
