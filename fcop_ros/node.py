@@ -11,6 +11,7 @@ publishing never waits for the estimator, and the estimator never works on a bac
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 import os
 import re
@@ -88,6 +89,7 @@ READ_ONLY = frozenset({"seed", "set_camera_info_service"})
 WINDOW_PARAMETERS = ("window_frames", "window_seconds", "noise_bound", "noise_bound_mode", "min_frames",
                      "min_support")
 _NAME = re.compile(r"[A-Za-z0-9_-]+")
+_WINDOW_OPTIONS = frozenset(inspect.signature(FocalWindow).parameters)
 
 
 class ParameterError(ValueError):
@@ -355,9 +357,12 @@ class FcopNode(Node):
     def _build_window(self, keep: bool) -> None:
         """A window with the current settings; with ``keep``, the old window's frames re-evaluated in it."""
         frames = list(self._history) if keep else []
-        self.window = FocalWindow(max_frames=self.p["window_frames"], max_age=self.p["window_seconds"] or None,
-                                  noise_bound=self.p["noise_bound"], bound_mode=self.p["noise_bound_mode"],
-                                  min_frames=self.p["min_frames"], min_support=self.p["min_support"])
+        options = dict(max_frames=self.p["window_frames"], max_age=self.p["window_seconds"] or None,
+                       noise_bound=self.p["noise_bound"], bound_mode=self.p["noise_bound_mode"],
+                       min_frames=self.p["min_frames"], min_support=self.p["min_support"])
+        # The window of the core rewrite weighs frames by their std_rel and takes no noise bound;
+        # pass what this FocalWindow accepts (the bound still shapes each frame's estimate).
+        self.window = FocalWindow(**{k: v for k, v in options.items() if k in _WINDOW_OPTIONS})
         self._history = deque()
         for est, t in frames:
             self._add_to_window(est, t)

@@ -4,7 +4,7 @@ import os
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -15,7 +15,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from conftest import BAD_CASES, clean_frame, corrupted
 from fcop_ros.core.pose import rotation_angle_deg
-from ros_helpers import Recorder, frame_messages, harness, header, spin_until, stamp_ns  # noqa: F401
+from ros_helpers import Gate, Recorder, frame_messages, harness, header, spin_until, stamp_ns  # noqa: F401
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config", "fcop.yaml")
 T0 = 1_700_000_000_000_000_000
@@ -316,3 +316,54 @@ def test_header_is_copied_from_depth(harness):
     h.send((d, n, m))
     assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
     assert h.info.msgs[0].header.frame_id == "my_depth_frame" and stamp_ns(h.info.msgs[0]) == T0
+
+
+def test_every_depth_image_gets_one_camera_info_while_the_estimator_is_stuck(harness, monkeypatch):
+    gate = Gate(monkeypatch)
+    # A deep synchroniser queue must not turn into an estimator backlog (issue 9.7).
+    h = harness(parameter_overrides=[Parameter("queue_size", value=50)])
+    try:
+        assert h.frame(frame_messages(cam(0), T0))
+        gate.close()
+        h.send(frame_messages(cam(1), T0 + DT))
+        assert spin_until(h.ex, lambda: h.node._busy_since is not None, 10)  # the estimator holds frame 1
+        for k in range(2, 10):
+            h.send(frame_messages(cam(k), T0 + k * DT))
+            # Published while the estimator cannot finish anything: publishing does not wait for it.
+            assert spin_until(h.ex, lambda: len(h.info) == k + 1, 10)
+        assert h.node.processed == 1 and h.node.handoff_dropped == 7  # frames 2..8 replaced by newer ones
+    finally:
+        gate.open()
+    assert h.settle()
+    assert spin_until(h.ex, lambda: len(h.poses) == 3, 10)
+    assert [stamp_ns(m) for m in h.info.msgs] == [T0 + k * DT for k in range(10)]  # each exactly once
+    assert all(abs(m.k[0] / 600.0 - 1) < 1e-3 for m in h.info.msgs)
+    # The estimator went from frame 1 straight to the newest, frame 9: no backlog.
+    assert [stamp_ns(m) for m in h.poses.msgs] == [T0, T0 + DT, T0 + 9 * DT]
+    assert h.node.rejected["estimator_busy"] == 7
+
+
+def test_diagnostics_error_when_the_estimator_stalls_and_warn_when_behind(harness, monkeypatch, capfd):
+    gate = Gate(monkeypatch)
+    h = harness(parameter_overrides=[Parameter("diagnostics_period", value=0.1),
+                                     Parameter("max_estimate_age", value=0.3)])
+    rec = Recorder(h.tester, DiagnosticArray, "/diagnostics")
+    try:
+        assert h.frame(frame_messages(cam(0), T0))
+        gate.close()
+        for k in range(1, 11):
+            h.send(frame_messages(cam(k), T0 + k * DT))
+            assert spin_until(h.ex, lambda: h.node.received == 3 * (k + 1), 10)
+        assert spin_until(h.ex, lambda: any(m.status[0].level == DiagnosticStatus.ERROR for m in rec.msgs), 10)
+        st = next(m.status[0] for m in rec.msgs if m.status[0].level == DiagnosticStatus.ERROR)
+        v = {kv.key: kv.value for kv in st.values}
+        assert "estimator stalled" in st.message and float(v["estimator_busy_s"]) > 0.3
+        assert v["rejected_estimator_busy"] == "8"
+        assert "the estimator is slower than the input" in capfd.readouterr().err  # the drops are logged
+    finally:
+        gate.open()
+    assert h.settle()
+    n = len(rec)
+    # Once it runs again: behind (skipped 8 frames, estimated 3 in the last 5 s), no longer stalled.
+    assert spin_until(h.ex, lambda: len(rec) > n and rec.msgs[-1].status[0].level != DiagnosticStatus.ERROR, 10)
+    assert rec.msgs[-1].status[0].level == DiagnosticStatus.WARN and "behind" in rec.msgs[-1].status[0].message

@@ -13,6 +13,7 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
+from fcop_ros.dds import large_image_profile, profile_env_vars
 from fcop_ros.synthetic import apply_noise, render_scene
 from ros_helpers import Recorder, frame_messages, ros_context, spin_until, stamp_ns
 
@@ -39,8 +40,12 @@ def _interrupt(proc, timeout=20.0) -> int:
 def test_installed_node_across_processes_answers_640x480(tmp_path):
     exe = os.path.join(BIN, "fcop_node")
     assert os.access(exe, os.X_OK), "the fcop_node console script is not installed in this environment"
-    # The conftest points this process and its children at config/fastdds_large_images.xml.
-    assert os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE", os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE"))
+    # The child must read the shipped large-image profile (conftest sets it unless the caller
+    # named one): the variable its Fast DDS reads names a file with the same content.
+    for var in profile_env_vars():
+        assert os.path.isfile(os.environ[var]), (var, os.environ[var])
+        with open(os.environ[var]) as fh, open(large_image_profile()) as shipped:
+            assert fh.read() == shipped.read(), f"{var} does not name config/fastdds_large_images.xml"
     proc, err = _start([exe, "--ros-args", "-p", "seed:=1", "-r", "__node:=fcop_xproc"], tmp_path, "node")
     try:
         with ros_context() as (ctx, ex):
