@@ -430,13 +430,14 @@ class FcopNode(Node):
         with self._lock:
             self.received += 1
             before = Counter(self.sync.stats.dropped)
+            before_inputs = Counter(self.sync.stats.per_input)
             resets = self.sync.stats.resets
             sets = self.sync.add(index, stamp, msg)
             accepted, outliers = self.sync.accepted, self.sync.outliers_dropped
             new_drops = self.sync.stats.dropped - before
+            new_inputs = self.sync.stats.per_input - before_inputs
             jumped = self.sync.stats.resets != resets
             if jumped:  # before the new frames reach the worker
-                self.rejected["sync_time_jump_reset"] += 1 if self._slot is not None else 0
                 self._reset_locked()
             for stamp_set, msgs in sets:
                 if self._slot is not None:
@@ -462,11 +463,14 @@ class FcopNode(Node):
             self._throttle.warn("time_jump", "fcop_node: time jumped back (looped bag?): synchroniser and "
                                              "window reset")
         for reason, n in new_drops.items():
-            if reason in ("outlier_stamp", "time_jump_reset"):
+            if reason == "outlier_stamp":  # counted per input above
                 continue
             self._reject("sync_" + reason, n)
-            self._throttle.warn("sync_" + reason, f"fcop_node: dropped {n} {INPUTS[index]} message(s) in the "
-                                                  f"synchroniser: {reason.replace('_', ' ')}")
+            if reason == "time_jump_reset":
+                continue
+            which = ", ".join(f"{INPUTS[i]} {k}" for (r, i), k in sorted(new_inputs.items()) if r == reason)
+            self._throttle.warn("sync_" + reason, f"fcop_node: dropped {n} message(s) in the synchroniser: "
+                                                  f"{reason.replace('_', ' ')} ({which})")
 
     def _check_frame_ids(self, msgs) -> None:
         ids = [m.header.frame_id for m in msgs]

@@ -238,7 +238,7 @@ def test_wrong_encoding_and_size_mismatch(harness):
     assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
 
 
-def test_stamps_backwards_and_silent_topic(harness):
+def test_stamps_backwards_and_silent_topic(harness, capfd):
     h = harness()
     fr = clean_frame(0)
     assert h.frame(frame_messages(fr, T0 + 10 * DT))
@@ -251,6 +251,7 @@ def test_stamps_backwards_and_silent_topic(harness):
         h.send(frame_messages(fr, T0 + (20 + k) * DT), which=(0, 1))
         assert spin_until(h.ex, lambda: seen() == 2 * (k + 1), 10)  # one frame at a time: no DDS-side loss
     assert h.node.rejected["sync_queue_full"] == 14
+    assert "in the synchroniser: queue full (depth 1)" in capfd.readouterr().err  # the log names the input
     assert h.node.sync.stats.matched == 1 and h.node.sync.pending() <= 2 * h.node.p["queue_size"]
     # A sustained jump back (a looped bag: three frames) resets the synchroniser and the window,
     # and uses the frames it held while waiting for the confirmation.
@@ -259,8 +260,9 @@ def test_stamps_backwards_and_silent_topic(harness):
         assert spin_until(h.ex, lambda: h.node.received == 3 + 3 + 24 + 3 * (k + 1), 10)
     assert h.settle()
     assert h.node.sync.stats.resets == 1 and h.node.sync.stats.matched == 4
+    assert h.node.rejected["sync_time_jump_reset"] == 10  # the depth and NOCS waiting for a mask
     assert h.node.rejected.total() == h.node.rejected["sync_late"] + h.node.rejected["sync_queue_full"] \
-        + h.node.rejected["estimator_busy"]
+        + h.node.rejected["estimator_busy"] + 10
     assert h.node.window.current.focal is not None and len(h.node.window) + h.node.handoff_dropped == 3
 
 
@@ -367,3 +369,19 @@ def test_diagnostics_error_when_the_estimator_stalls_and_warn_when_behind(harnes
     # Once it runs again: behind (skipped 8 frames, estimated 3 in the last 5 s), no longer stalled.
     assert spin_until(h.ex, lambda: len(rec) > n and rec.msgs[-1].status[0].level != DiagnosticStatus.ERROR, 10)
     assert rec.msgs[-1].status[0].level == DiagnosticStatus.WARN and "behind" in rec.msgs[-1].status[0].message
+
+
+def test_image_size_change_starts_a_new_window(harness, capfd):
+    h = harness()
+    assert h.frame(frame_messages(cam(0), T0))
+    assert h.frame(frame_messages(cam(1), T0 + DT))
+    small = clean_frame(2, 320, 240, 300.0)  # another camera mode: half the size, half the focal
+    assert h.frame(frame_messages(small, T0 + 2 * DT))
+    assert len(h.node.window) == 1 and abs(h.node.window.current.focal / 300.0 - 1) < 1e-3
+    assert "image size changed from 640x480 to 320x240" in capfd.readouterr().err
+    # Its depth image arrived while the estimate was for 640x480 (none then); it gets its own
+    # CameraInfo once the new window has an estimate.
+    assert spin_until(h.ex, lambda: len(h.info) == 3, 10)
+    last = h.info.msgs[-1]
+    assert stamp_ns(last) == T0 + 2 * DT and (last.width, last.height) == (320, 240)
+    assert abs(last.k[0] / 300.0 - 1) < 1e-3 and last.k[2] == 159.5
