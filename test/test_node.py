@@ -57,8 +57,10 @@ def test_camera_info_per_input_stamp_within_bound(harness):
         stamp = T0 + k * DT
         h.send(frame_messages(fr, stamp))
         sent.append(stamp)
-        assert spin_until(h.ex, lambda: len(h.info) >= k + 1 and len(h.markers) >= k + 1, 20)
+        assert spin_until(h.ex, lambda: len(h.info) >= k + 1 and len(h.poses) >= k + 1 and len(h.markers) >= k + 1,
+                          20)
     assert [stamp_ns(m) for m in h.info.msgs] == sent
+    assert len(h.poses) == len(h.markers) == len(sent)  # zip below must not drop any
     rot, trans = [], []
     for info, poses, markers, fr in zip(h.info.msgs, h.poses.msgs, h.markers.msgs, frames):
         # REP-104
