@@ -29,8 +29,7 @@ from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data,
-                       qos_profile_system_default)
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
@@ -285,12 +284,13 @@ class FcopNode(Node):
         self.sub_info_in = self.create_subscription(CameraInfo, "camera_info_in", self._on_camera_info_in,
                                                     qos_profile_sensor_data, qos_overriding_options=qos_in)
         qos_out = QoSOverridingOptions.with_default_policies()
-        self.pub_info = self.create_publisher(CameraInfo, "camera_info", qos_profile_system_default,
-                                              qos_overriding_options=qos_out)
-        self.pub_poses = self.create_publisher(PoseArray, "object_poses", qos_profile_system_default,
-                                               qos_overriding_options=qos_out)
-        self.pub_markers = self.create_publisher(MarkerArray, "object_markers", qos_profile_system_default,
-                                                 qos_overriding_options=qos_out)
+        # Reliable, volatile, keep last 10, spelled out: the "system default" profile leaves the
+        # durability to the RMW, and Fast DDS then makes the writer transient local.
+        out = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
+        self.pub_info = self.create_publisher(CameraInfo, "camera_info", out, qos_overriding_options=qos_out)
+        self.pub_poses = self.create_publisher(PoseArray, "object_poses", out, qos_overriding_options=qos_out)
+        self.pub_markers = self.create_publisher(MarkerArray, "object_markers", out, qos_overriding_options=qos_out)
         self.pub_latest = self._latched_publisher()
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.srv_reset = self.create_service(Trigger, "~/reset", self._on_reset)

@@ -238,3 +238,23 @@ def test_nocs_convention_focal_and_pose(harness, convention, data, right):
         assert focal_err < 1e-3 and rot < 1.0, (focal_err, rot)
     else:
         assert focal_err > 0.05 or rot > 20.0, (focal_err, rot)
+
+
+def test_output_qos_is_what_the_readme_says(harness):
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
+    h = harness()
+    text = open(os.path.join(ROOT, "README.md")).read()
+    assert "outputs reliable, volatile, keep last 10" in text
+    assert "`~/latest_camera_info` | sensor_msgs/CameraInfo | out | reliable, transient local, depth 1" in text
+    for topic in ("/camera_info", "/object_poses", "/object_markers"):
+        (info,) = h.tester.get_publishers_info_by_topic(topic)  # as the graph (another node) sees it
+        assert (info.qos_profile.reliability, info.qos_profile.durability) == (
+            ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE), topic
+    for pub in (h.node.pub_info, h.node.pub_poses, h.node.pub_markers):
+        assert (pub.qos_profile.history, pub.qos_profile.depth) == (HistoryPolicy.KEEP_LAST, 10)
+    (info,) = h.tester.get_publishers_info_by_topic("/fcop_node/latest_camera_info")
+    assert (info.qos_profile.reliability, info.qos_profile.durability) == (
+        ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)
+    for topic in ("/depth", "/nocs", "/mask", "/camera_info_in"):
+        (info,) = h.tester.get_subscriptions_info_by_topic(topic)
+        assert info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT, topic
