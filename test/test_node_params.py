@@ -47,6 +47,20 @@ def test_bad_parameter_at_start_up_is_one_line_and_exit_2(arg, expected):
     assert all(e in lines[0] for e in expected), lines[0]
 
 
+@pytest.mark.parametrize("overrides, expected", [
+    ({"focal_min": 30000.0}, "parameter focal_min=30000.0 is not allowed: it must be below focal_max=20000.0"),
+    ({"noise_bound": 0.9}, "parameter noise_bound=0.9 is not allowed: a fraction in (0, 0.5]"),
+    ({"camera_name": "my camera"}, "parameter camera_name='my camera' is not allowed"),
+])
+def test_bad_parameter_in_process_raises_parameter_error(overrides, expected):
+    from fcop_ros.node import FcopNode, ParameterError
+    from ros_helpers import ros_context
+    with ros_context() as (ctx, ex):
+        with pytest.raises(ParameterError) as err:
+            FcopNode(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()])
+        assert str(err.value).startswith(expected)
+
+
 def test_integer_for_a_float_parameter_is_taken(harness):
     # `-p focal_min:=300` is what people type; rclpy alone refuses an INTEGER for a DOUBLE.
     h = harness(node_args=["--ros-args", "-p", "focal_min:=300"])
