@@ -20,6 +20,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", sorted(glob.glob("config/*"))),
+        ("share/" + package_name + "/launch", sorted(glob.glob("launch/*.launch.py"))),
     ],
     python_requires=">=3.10",
     install_requires=["numpy", "scipy", "opencv-python-headless", "rosbags>=0.10", "mcap", "matplotlib", "tqdm",

@@ -1,11 +1,14 @@
 """fcop_node throughput, latency and memory, in-process, 640x480 inputs with 5 objects.
 
-    python bench/bench_node.py [--frames 600] [--rate 30] [--cores 1]     (make bench)
+    python bench/bench_node.py [--frames 600] [--rate 30] [--cores 1] [--slow-ms 0]     (make bench)
 
-Paced run: a timer publishes depth, NOCS and mask at --rate; latency is the time from the
-depth message's publication to the CameraInfo with its stamp. Reference in the same run: the
-latency of the depth image itself to a plain subscriber (DDS transport alone). Closed loop: the
-next frame is published when the previous CameraInfo arrives: the node's maximum frame rate.
+Paced run: a timer publishes depth, NOCS and mask at --rate; CameraInfo latency is the time from
+the depth message's publication to the CameraInfo with its stamp (published on arrival with the
+current estimate), estimate latency the time to the poses of that frame (for the frames the
+estimator took; it skips to the newest frame when it is slower than the input). Reference in
+the same run: the latency of the depth image itself to a plain subscriber (DDS transport alone).
+--slow-ms adds that much to every frame estimate (a deliberately slow estimator). Closed loop:
+the next frame is published when the previous frame's poses arrive: the estimator's maximum rate.
 Memory: resident set size sampled over the paced run (flat means no growth per frame).
 --cores 1 pins the process to one core (both the executor and the estimator thread).
 """
@@ -35,16 +38,26 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=30.0)
     ap.add_argument("--cores", type=int, default=1)
     ap.add_argument("--closed-loop-frames", type=int, default=200)
+    ap.add_argument("--slow-ms", type=float, default=0.0, help="extra time per frame estimate (ms)")
     args = ap.parse_args()
     if args.cores:
         os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[: args.cores]))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", str(50 + os.getpid() % 150))
+    from geometry_msgs.msg import PoseArray
     from rclpy.node import Node
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
 
+    import fcop_ros.node as node_module
     from fcop_ros.node import FcopNode
+    if args.slow_ms > 0:
+        real = node_module.estimate_focal
+
+        def slow(*a, **k):
+            time.sleep(args.slow_ms / 1000)
+            return real(*a, **k)
+        node_module.estimate_focal = slow
     from msg_adapters import stamp_ns
     from fcop_ros.synthetic import apply_noise, render_scene
     from ros_helpers import frame_messages, ros_context, spin_until
@@ -53,14 +66,16 @@ def main() -> None:
               for k in range(20)]
     msgs = [frame_messages(fr, 0) for fr in frames]
     print(f"machine: {os.cpu_count()} cores, pinned to {len(os.sched_getaffinity(0))}; "
-          f"{args.frames} frames 640x480, 5 objects, preset moderate")
+          f"{args.frames} frames 640x480, 5 objects, preset moderate, estimator slowed by {args.slow_ms:g} ms")
     with ros_context() as (ctx, ex):
         node = FcopNode(context=ctx)
         tester = Node("bench", context=ctx)
         pubs = [tester.create_publisher(Image, t, qos_profile_sensor_data) for t in ("depth", "nocs", "mask")]
-        sent, got, depth_got = {}, {}, {}
+        sent, got, depth_got, posed = {}, {}, {}, {}
         tester.create_subscription(CameraInfo, "camera_info",
                                    lambda m: got.setdefault(stamp_ns(m), time.perf_counter()), 100)
+        tester.create_subscription(PoseArray, "object_poses",
+                                   lambda m: posed.setdefault(stamp_ns(m), time.perf_counter()), 100)
         tester.create_subscription(Image, "depth", lambda m: depth_got.setdefault(stamp_ns(m), time.perf_counter()),
                                    qos_profile_sensor_data)
         ex.add_node(node)
@@ -89,17 +104,21 @@ def main() -> None:
 
         timer = tester.create_timer(1.0 / args.rate, tick)
         t0 = time.perf_counter()
-        spin_until(ex, lambda: state["k"] >= args.frames and node.idle() and len(got) >= node.published,
-                   timeout=args.frames / args.rate * 4 + 30)
+        spin_until(ex, lambda: state["k"] >= args.frames and node.idle() and len(posed) >= node.published
+                   and len(got) >= node.camera_info_published, timeout=args.frames / args.rate * 4 + 30)
         wall = time.perf_counter() - t0
         tester.destroy_timer(timer)
         lat = np.array([got[s] - sent[s] for s in sent if s in got]) * 1000
         dds = np.array([depth_got[s] - sent[s] for s in sent if s in depth_got]) * 1000
+        est = np.array([posed[s] - sent[s] for s in sent if s in posed]) * 1000
         done = len(lat)
-        print(f"paced at {args.rate:.0f} Hz: {done}/{args.frames} frames answered "
-              f"({done / wall:.1f} frames/s sustained, hand-off drops {node.handoff_dropped}, "
-              f"sync drops {node.sync.stats.dropped_total})")
-        print(f"  latency depth -> CameraInfo: median {np.median(lat):.1f} ms, p95 {np.percentile(lat, 95):.1f} ms")
+        print(f"paced at {args.rate:.0f} Hz: {done}/{args.frames} depth images got their CameraInfo "
+              f"({done / wall:.1f} CameraInfo/s over {wall:.1f} s); the estimator took {node.processed} frames "
+              f"({node.processed / wall:.1f}/s), skipped {node.handoff_dropped} for newer ones; "
+              f"sync drops {node.sync.stats.dropped_total}")
+        print(f"  latency depth -> CameraInfo: median {np.median(lat):.2f} ms, p95 {np.percentile(lat, 95):.2f} ms")
+        print(f"  latency depth -> poses of the frame (estimated frames): median {np.median(est):.1f} ms, "
+              f"p95 {np.percentile(est, 95):.1f} ms")
         print(f"  reference, depth image to a plain subscriber: median {np.median(dds):.2f} ms, "
               f"p95 {np.percentile(dds, 95):.2f} ms")
         proc = np.array(node._proc_times) * 1000
@@ -108,15 +127,16 @@ def main() -> None:
             print(f"  resident memory: {mem[0]:.0f} MB after 50 frames, {mem[-1]:.0f} MB after {50 * len(mem)} frames")
 
         # Closed loop: maximum rate.
-        got.clear()
+        posed.clear()
         sent.clear()
         base = args.frames + 10
         t0 = time.perf_counter()
         for i in range(args.closed_loop_frames):
             publish(base + i)
-            spin_until(ex, lambda: len(got) >= i + 1, 10)
+            spin_until(ex, lambda: len(posed) >= i + 1, 10)
         wall = time.perf_counter() - t0
-        print(f"closed loop: {args.closed_loop_frames / wall:.1f} frames/s")
+        print(f"closed loop (next frame when the previous one's poses arrive): "
+              f"{args.closed_loop_frames / wall:.1f} frames/s")
         node.destroy_node()
         tester.destroy_node()
 

@@ -1,29 +1,38 @@
 """fcop_node: live focal length from depth, NOCS and instance-mask images.
 
-A thin shell around :mod:`fcop_ros.core`: it converts messages (msg_adapters), synchronises
-them by stamp (:mod:`fcop_ros.sync`), hands matched frames to a worker thread through a
-bounded drop-oldest queue (heavy work never runs in a subscription callback), feeds each
-frame's evidence to the sliding window and publishes CameraInfo, poses and markers once the
-window has evidence. Nothing is published for a frame without evidence.
+A thin shell around :mod:`fcop_ros.core`. Input side (subscription callbacks, cheap): every
+message passes the stamp check and the synchroniser (:mod:`fcop_ros.sync`); every depth image
+that passes gets its CameraInfo at once, carrying the window's current estimate; every matched
+frame replaces the one in a one-slot hand-off. Estimator side (a worker thread): it takes the
+newest complete frame whenever it is free, estimates it, updates the sliding window (and with
+it the estimate the next depth images carry) and publishes that frame's poses and markers. So
+publishing never waits for the estimator, and the estimator never works on a backlog.
 """
 from __future__ import annotations
 
+import dataclasses
+import inspect
 import math
+import os
+import re
+import sys
 import threading
 import time
-from collections import Counter, deque
+from collections import Counter, OrderedDict, deque
 
 import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.exceptions import ParameterException
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data,
-                       qos_profile_system_default)
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -34,8 +43,9 @@ from .core import FocalWindow, estimate_focal
 from .sync import StampSynchronizer
 
 INPUTS = ("depth", "nocs", "mask")
+NOCS_CONVENTIONS = ("fcop", "nocs_dataset")
 
-# name: (default, description, (min, max) or choices or None)
+# name: (default, description, (min, max) or choices or a text constraint or None)
 PARAMETERS = {
     "window_frames": (30, "Frames in the sliding window of focal evidence.", (1, 1000)),
     "window_seconds": (0.0, "Also forget frames older than this many seconds (0 = no age limit).", (0.0, 3600.0)),
@@ -48,22 +58,58 @@ PARAMETERS = {
     "focal_max": (20000.0, "Largest focal length considered, pixels.", (1.0, 1e6)),
     "min_object_pixels": (50, "Instances with fewer usable pixels are ignored.", (3, 10000000)),
     "depth_scale": (0.001, "Metres per unit of 16UC1 depth images (REP-118: millimetres).", (1e-9, 1000.0)),
-    "principal_point_x": (-1.0, "cx in pixels; negative = image centre (W-1)/2.", (-1.0, 1e6)),
-    "principal_point_y": (-1.0, "cy in pixels; negative = image centre (H-1)/2.", (-1.0, 1e6)),
+    "principal_point_x": (-1.0, "cx in pixels (inside the image); negative = from camera_info_in, else the image "
+                                "centre (W-1)/2.", (-1.0, 1e6)),
+    "principal_point_y": (-1.0, "cy in pixels (inside the image); negative = from camera_info_in, else the image "
+                                "centre (H-1)/2.", (-1.0, 1e6)),
     "sync_mode": ("exact", "'exact' (equal stamps) or 'approximate' (within sync_slop).", ("exact", "approximate")),
     "sync_slop": (0.01, "Largest stamp difference within a frame in approximate mode, seconds.", (0.0, 1.0)),
-    "queue_size": (5, "Messages per input waiting for a match, and frames waiting for the estimator.", (1, 100)),
+    "queue_size": (5, "Messages per input waiting in the synchroniser for the other inputs.", (1, 100)),
     "publish_poses": (True, "Publish object_poses (geometry_msgs/PoseArray).", None),
     "publish_markers": (True, "Publish object_markers (visualization_msgs/MarkerArray).", None),
     "min_frames": (1, "Frames the window needs before it reports a focal length.", (1, 1000)),
     "min_support": (30, "Agreeing triplet votes the window needs before it reports a focal length.", (1, 10000000)),
+    "max_uncertainty": (0.05, "Largest relative standard error (std_rel) of the window's focal length at which "
+                              "CameraInfo is published and a calibration saved.", (1e-6, 1.0)),
     "diagnostics_period": (1.0, "Seconds between /diagnostics messages.", (0.05, 60.0)),
-    "seed": (-1, "Random seed of triplet sampling (-1 = from the OS).", (-1, 2 ** 31 - 1)),
+    "max_estimate_age": (2.0, "Diagnostics go ERROR when the estimator has been busy with one frame for longer "
+                              "than this many seconds (stalled).", (0.1, 3600.0)),
+    "nocs_convention": ("fcop", "Axes of the NOCS input: 'fcop' (this package's) or 'nocs_dataset' (the NOCS "
+                                "dataset's: z = 1 - z).", NOCS_CONVENTIONS),
+    "camera_name": ("camera", "Camera name in the file ~/save_calibration writes.", "letters, digits, _ and -"),
+    "calibration_file": ("", "File ~/save_calibration writes ('' = ~/.ros/camera_info/<camera_name>.yaml).",
+                         "a file path"),
+    "set_camera_info_service": ("", "sensor_msgs/srv/SetCameraInfo service ~/save_calibration also calls, e.g. the "
+                                    "driver's set_camera_info ('' = none). Read-only.", "a service name"),
+    "seed": (-1, "Random seed of triplet sampling (-1 = from the OS). Read-only.", (-1, 2 ** 31 - 1)),
 }
+# Set once at start-up: refused at run time (the descriptor says read_only).
+READ_ONLY = frozenset({"seed", "set_camera_info_service"})
+WINDOW_PARAMETERS = ("window_frames", "window_seconds", "noise_bound", "noise_bound_mode", "min_frames",
+                     "min_support")
+_NAME = re.compile(r"[A-Za-z0-9_-]+")
+_WINDOW_OPTIONS = frozenset(inspect.signature(FocalWindow).parameters)
+
+
+class ParameterError(ValueError):
+    """A parameter value fcop_node cannot run with; the message names it, its value and what is allowed."""
+
+
+def allowed(name: str) -> str:
+    """What parameter ``name`` accepts, in words."""
+    default, _, limits = PARAMETERS[name]
+    if isinstance(default, bool):
+        return "true or false"
+    if isinstance(limits, tuple) and isinstance(limits[0], str):
+        return "one of " + ", ".join(limits)
+    if isinstance(limits, tuple):
+        kind = "an integer" if isinstance(default, int) else "a number"
+        return f"{kind} in [{limits[0]}, {limits[1]}]"
+    return f"a string ({limits})"
 
 
 def _descriptor(name, default, description, limits):
-    d = ParameterDescriptor(name=name, description=description)
+    d = ParameterDescriptor(name=name, description=description, read_only=name in READ_ONLY)
     if isinstance(limits, tuple) and len(limits) == 2 and not isinstance(limits[0], str):
         if isinstance(default, bool):
             pass
@@ -73,7 +119,48 @@ def _descriptor(name, default, description, limits):
             d.floating_point_range = [FloatingPointRange(from_value=float(limits[0]), to_value=float(limits[1]))]
     elif isinstance(limits, tuple):
         d.additional_constraints = "one of: " + ", ".join(limits)
+    elif isinstance(limits, str):
+        d.additional_constraints = limits
     return d
+
+
+def check_value(name: str, value):
+    """``value`` converted to the parameter's type, or ParameterError naming name, value and range."""
+    default, _, limits = PARAMETERS[name]
+    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if type(value) is not type(default):
+        raise ParameterError(f"parameter {name}={value!r} is not allowed: {allowed(name)}")
+    if isinstance(value, bool):
+        ok = True
+    elif isinstance(limits, tuple) and isinstance(limits[0], str):
+        ok = value in limits
+    elif isinstance(limits, tuple):
+        ok = limits[0] <= value <= limits[1]
+    elif name == "camera_name":
+        ok = bool(_NAME.fullmatch(value))
+    else:
+        ok = "\n" not in value
+    if not ok:
+        raise ParameterError(f"parameter {name}={value!r} is not allowed: {allowed(name)}")
+    return value
+
+
+def check_combination(p: dict, image_size=None) -> str:
+    """What is wrong with a complete set of values together ('' if nothing)."""
+    if p["focal_min"] >= p["focal_max"]:
+        return (f"parameter focal_min={p['focal_min']} is not allowed: it must be below "
+                f"focal_max={p['focal_max']}")
+    if p["noise_bound_mode"] == "relative" and not 0 < p["noise_bound"] <= 0.5:
+        return (f"parameter noise_bound={p['noise_bound']} is not allowed: a fraction in (0, 0.5] in relative "
+                f"noise_bound_mode")
+    if image_size is not None:
+        for axis, size in (("x", image_size[0]), ("y", image_size[1])):
+            v = p[f"principal_point_{axis}"]
+            if v >= 0 and not v <= size - 1:
+                return (f"parameter principal_point_{axis}={v} is not allowed: inside the {image_size[0]}x"
+                        f"{image_size[1]} image, [0, {size - 1}] (or negative for the default)")
+    return ""
 
 
 class _Throttle:
@@ -83,47 +170,110 @@ class _Throttle:
         self.logger, self.period = logger, period
         self._last: dict[str, float] = {}
         self._since: Counter = Counter()
+        self._lock = threading.Lock()
+
+    def _due(self, reason: str):
+        with self._lock:
+            self._since[reason] += 1
+            now = time.monotonic()
+            if now - self._last.get(reason, -math.inf) >= self.period:
+                self._last[reason] = now
+                return self._since.pop(reason)
+        return 0
 
     def warn(self, reason: str, text: str) -> None:
-        self._since[reason] += 1
-        now = time.monotonic()
-        if now - self._last.get(reason, -math.inf) >= self.period:
-            n = self._since.pop(reason)
-            self._last[reason] = now
+        n = self._due(reason)
+        if n:
             self.logger.warning(f"{text}" + (f" ({n} such since the last report)" if n > 1 else ""))
+
+    def info(self, reason: str, text: str) -> None:
+        n = self._due(reason)
+        if n:
+            self.logger.info(f"{text}" + (f" ({n} such since the last report)" if n > 1 else ""))
+
+
+class _Reject(Exception):
+    def __init__(self, reason: str, text: str):
+        super().__init__(text)
+        self.reason = reason
+
+
+@dataclasses.dataclass
+class _Publishable:
+    """The estimate depth images get their CameraInfo from: the window's, when within max_uncertainty."""
+    focal: float
+    std_rel: float
+    width: int
+    height: int
+    window: object  # the WindowEstimate
+
+
+def _light(est):
+    """The frame estimate without its pixel data: what the window needs to re-evaluate it later."""
+    names = {f.name for f in dataclasses.fields(est)}
+    heavy = {"instances": [], "inlier_masks": None, "votes": np.zeros(0), "objects": []}
+    return dataclasses.replace(est, **{k: v for k, v in heavy.items() if k in names})
+
+
+def calibration_yaml(info: CameraInfo, camera_name: str) -> str:
+    """CameraInfo in the camera_calibration_parsers YAML format (what camera_info_manager loads)."""
+    def mat(rows, cols, data):
+        values = ", ".join(repr(float(v)) for v in data)
+        return f"\n  rows: {rows}\n  cols: {cols}\n  data: [{values}]"
+    return (f"image_width: {int(info.width)}\nimage_height: {int(info.height)}\ncamera_name: {camera_name}\n"
+            f"camera_matrix:{mat(3, 3, info.k)}\ndistortion_model: {info.distortion_model}\n"
+            f"distortion_coefficients:{mat(1, len(info.d), info.d)}\n"
+            f"rectification_matrix:{mat(3, 3, info.r)}\nprojection_matrix:{mat(3, 4, info.p)}\n")
 
 
 class FcopNode(Node):
-    """The fcop_node ROS 2 node (see the package README for topics and parameters)."""
+    """The fcop_node ROS 2 node (see the package README for topics, parameters and the rules)."""
 
     def __init__(self, node_name: str = "fcop_node", **kwargs):
+        self._worker = None  # destroy_node works even when the parameters are refused
         super().__init__(node_name, **kwargs)
-        for name, (default, text, limits) in PARAMETERS.items():
-            self.declare_parameter(name, default, _descriptor(name, default, text, limits))
+        try:
+            self._declare_parameters()
+        except ParameterError:
+            Node.destroy_node(self)
+            raise
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        problem = self._check(self.p)
-        if problem:
-            raise ValueError(f"fcop_node: invalid parameters: {problem}")
 
-        self.rejected: Counter = Counter()
-        self.last = None  # (stamp ns, WindowEstimate, published ObjectPoses, CameraInfo) of the last publication
-        self.received = 0
-        self.processed = 0
-        self.published = 0
-        self.handoff_dropped = 0
+        self._now = time.monotonic  # the clock of rates and ages; replaceable in tests
+        self.rejected: Counter = Counter()   # dropped input, by reason
+        self.warnings: Counter = Counter()   # accepted input that deserved a word, by reason
+        #: The last CameraInfo publication: (stamp ns, the WindowEstimate it carries, the objects of the
+        #: newest processed frame (of this stamp once that frame is processed), the CameraInfo).
+        self.last = None
+        self.received = 0          # input messages
+        self.processed = 0         # frames the estimator finished
+        self.published = 0         # frames whose estimate was published (poses and markers)
+        self.camera_info_published = 0
+        self.handoff_dropped = 0   # matched frames replaced in the hand-off before the estimator took them
+        self.last_estimate = None  # the FocalEstimate of the newest processed frame
         self._proc_times: deque = deque(maxlen=200)
-        self._arrivals: deque = deque(maxlen=200)
+        self._samples: deque = deque()  # (time, matched, processed, skipped) at each diagnostics message
         self._throttle = _Throttle(self.get_logger())
         self._lock = threading.Lock()
         self._cv = threading.Condition(self._lock)
-        self._frames: deque = deque()
-        self._busy = False
+        self._pub_lock = threading.Lock()  # CameraInfo publication from the two threads
+        self._slot = None          # the newest complete frame, waiting for the estimator
+        self._busy_since = None
+        self._last_done = None
         self._stop = False
-        self._rng_seed = None if self.p["seed"] < 0 else int(self.p["seed"])
-        self._rng = np.random.default_rng(self._rng_seed)
-        self._build_sync()
-        self._build_window()
+        self._generation = 0       # bumped by every reset: frames taken before it are discarded
+        self._size = None          # (width, height) of the frames in the window
+        self._estimate: _Publishable | None = None
+        self._history: deque = deque()  # the window's frames, light, to re-evaluate under new settings
+        self._last_objects: list = []
+        self._answered: OrderedDict = OrderedDict()  # depth stamps that got their CameraInfo
+        self._unanswered: OrderedDict = OrderedDict()  # depth stamps that arrived without an estimate
+        self._last_info_stamp = -1
+        self._cam_in: CameraInfo | None = None
+        self._warned_distortion = False
+        self._rng = np.random.default_rng(None if self.p["seed"] < 0 else int(self.p["seed"]))
+        self.sync = self._new_sync()
+        self._build_window(keep=False)
 
         qos_in = QoSOverridingOptions.with_default_policies()
         self._subs = [
@@ -131,129 +281,259 @@ class FcopNode(Node):
                                      qos_overriding_options=qos_in)
             for i, name in enumerate(INPUTS)
         ]
+        self.sub_info_in = self.create_subscription(CameraInfo, "camera_info_in", self._on_camera_info_in,
+                                                    qos_profile_sensor_data, qos_overriding_options=qos_in)
         qos_out = QoSOverridingOptions.with_default_policies()
-        self.pub_info = self.create_publisher(CameraInfo, "camera_info", qos_profile_system_default,
-                                              qos_overriding_options=qos_out)
-        self.pub_poses = self.create_publisher(PoseArray, "object_poses", qos_profile_system_default,
-                                               qos_overriding_options=qos_out)
-        self.pub_markers = self.create_publisher(MarkerArray, "object_markers", qos_profile_system_default,
-                                                 qos_overriding_options=qos_out)
-        latched = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.pub_latest = self.create_publisher(CameraInfo, "~/latest_camera_info", latched)
+        # Reliable, volatile, keep last 10, spelled out: the "system default" profile leaves the
+        # durability to the RMW, and Fast DDS then makes the writer transient local.
+        out = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
+        self.pub_info = self.create_publisher(CameraInfo, "camera_info", out, qos_overriding_options=qos_out)
+        self.pub_poses = self.create_publisher(PoseArray, "object_poses", out, qos_overriding_options=qos_out)
+        self.pub_markers = self.create_publisher(MarkerArray, "object_markers", out, qos_overriding_options=qos_out)
+        self.pub_latest = self._latched_publisher()
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.srv_reset = self.create_service(Trigger, "~/reset", self._on_reset)
+        self.srv_save = self.create_service(Trigger, "~/save_calibration", self._on_save_calibration)
+        self.set_info_client = (self.create_client(SetCameraInfo, self.p["set_camera_info_service"])
+                                if self.p["set_camera_info_service"] else None)
         self._diag_timer = self.create_timer(float(self.p["diagnostics_period"]), self.publish_diagnostics)
         self._worker = threading.Thread(target=self._work, name="fcop_estimator", daemon=True)
         self._worker.start()
         self.get_logger().info(
-            f"fcop_node ready: inputs {[s.topic_name for s in self._subs]}, sync {self.p['sync_mode']}, "
-            f"window {self.p['window_frames']} frames")
+            f"fcop_node ready: inputs {[s.topic_name for s in self._subs]}, camera_info_in "
+            f"{self.sub_info_in.topic_name}, sync {self.p['sync_mode']}, window {self.p['window_frames']} frames")
 
     # ----- parameters
-    @staticmethod
-    def _check(p: dict) -> str:
-        if p["focal_min"] >= p["focal_max"]:
-            return f"focal_min ({p['focal_min']}) must be below focal_max ({p['focal_max']})"
-        for name in ("noise_bound_mode", "sync_mode"):
-            choices = PARAMETERS[name][2]
-            if p[name] not in choices:
-                return f"{name} must be one of {choices}, got {p[name]!r}"
-        if p["noise_bound_mode"] == "relative" and not 0 < p["noise_bound"] <= 0.5:
-            return f"noise_bound {p['noise_bound']} is not a fraction in (0, 0.5] (relative mode)"
-        return ""
+    def _declare_parameters(self) -> None:
+        overrides = getattr(self, "_parameter_overrides", {})
+        for name, (default, text, limits) in PARAMETERS.items():
+            given = overrides.get(name)
+            if given is not None and isinstance(default, float) and type(given.value) is int:
+                overrides[name] = Parameter(name, value=float(given.value))  # focal_min:=300 means 300.0
+            try:
+                self.declare_parameter(name, default, _descriptor(name, default, text, limits))
+            except ParameterException:
+                value = overrides[name].value if name in overrides else "?"
+                raise ParameterError(f"parameter {name}={value!r} is not allowed: {allowed(name)}") from None
+        self.p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        for name, value in self.p.items():
+            check_value(name, value)
+        problem = check_combination(self.p)
+        if problem:
+            raise ParameterError(problem)
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         new = dict(self.p)
-        for prm in params:
-            if prm.name not in PARAMETERS:
-                continue
-            default = PARAMETERS[prm.name][0]
-            value = prm.value
-            if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
-                value = float(value)
-            if type(value) is not type(default):
-                return SetParametersResult(successful=False,
-                                           reason=f"{prm.name} must be {type(default).__name__}, got {value!r}")
-            lim = PARAMETERS[prm.name][2]
-            if isinstance(lim, tuple) and len(lim) == 2 and not isinstance(lim[0], str) \
-                    and not isinstance(value, bool) and not lim[0] <= value <= lim[1]:
-                return SetParametersResult(successful=False,
-                                           reason=f"{prm.name}={value} is outside [{lim[0]}, {lim[1]}]")
-            new[prm.name] = value
-        problem = self._check(new)
+        try:
+            for prm in params:
+                if prm.name in PARAMETERS:
+                    if prm.name in READ_ONLY:
+                        raise ParameterError(f"parameter {prm.name} is read-only: set it at start-up")
+                    new[prm.name] = check_value(prm.name, prm.value)
+        except ParameterError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        problem = check_combination(new, self._size)
         if problem:
             return SetParametersResult(successful=False, reason=problem)
         changed = {k for k in new if new[k] != self.p.get(k)}
         with self._lock:
             self.p = new
             if changed & {"sync_mode", "sync_slop", "queue_size"}:
-                self._build_sync()
-            if changed & {"window_frames", "window_seconds", "noise_bound", "noise_bound_mode", "min_frames",
-                          "min_support"}:
-                self._build_window()
-            if "seed" in changed:
-                self._rng = np.random.default_rng(None if new["seed"] < 0 else int(new["seed"]))
+                self.sync.configure(new["queue_size"], new["sync_slop"] if new["sync_mode"] == "approximate" else 0.0)
+            if changed & set(WINDOW_PARAMETERS):
+                self._build_window(keep=True)
+            elif changed & {"max_uncertainty"}:
+                self._update_estimate_locked(self.window.current)
+        if "diagnostics_period" in changed:
+            self.destroy_timer(self._diag_timer)
+            self._diag_timer = self.create_timer(float(new["diagnostics_period"]), self.publish_diagnostics)
         return SetParametersResult(successful=True)
 
-    def _build_sync(self) -> None:
+    def _new_sync(self) -> StampSynchronizer:
         slop = self.p["sync_slop"] if self.p["sync_mode"] == "approximate" else 0.0
-        self.sync = StampSynchronizer(len(INPUTS), self.p["queue_size"], slop)
+        return StampSynchronizer(len(INPUTS), self.p["queue_size"], slop)
 
-    def _build_window(self) -> None:
-        self.window = FocalWindow(max_frames=self.p["window_frames"], max_age=self.p["window_seconds"] or None,
-                                  min_frames=self.p["min_frames"], min_support=self.p["min_support"])
+    def _build_window(self, keep: bool) -> None:
+        """A window with the current settings; with ``keep``, the old window's frames re-evaluated in it."""
+        frames = list(self._history) if keep else []
+        options = dict(max_frames=self.p["window_frames"], max_age=self.p["window_seconds"] or None,
+                       noise_bound=self.p["noise_bound"], bound_mode=self.p["noise_bound_mode"],
+                       min_frames=self.p["min_frames"], min_support=self.p["min_support"])
+        # The window of the core rewrite weighs frames by their std_rel and takes no noise bound;
+        # pass what this FocalWindow accepts (the bound still shapes each frame's estimate).
+        self.window = FocalWindow(**{k: v for k, v in options.items() if k in _WINDOW_OPTIONS})
+        self._history = deque()
+        for est, t in frames:
+            self._add_to_window(est, t)
+        self._update_estimate_locked(self.window.current)
 
-    # ----- input side: cheap, never blocks on the estimator
+    def _add_to_window(self, est, t: float):
+        win = self.window.add(est, t)
+        self._history.append((est, t))
+        while len(self._history) > len(self.window):
+            self._history.popleft()
+        return win
+
+    def _update_estimate_locked(self, win) -> None:
+        std = getattr(win, "std_rel", None)
+        if win.focal is None or std is None or std > self.p["max_uncertainty"] or self._size is None:
+            self._estimate = None
+        else:
+            self._estimate = _Publishable(float(win.focal), float(std), self._size[0], self._size[1], win)
+
+    def _reset_locked(self) -> None:
+        self.window.reset()
+        self._history.clear()
+        self._estimate = None
+        self._slot = None
+        self._generation += 1
+
+    # ----- intrinsics other than f: parameters, camera_info_in, image centre
+    def _intrinsics(self, w: int, h: int):
+        """(cx, cy, D, distortion model, R) for a w x h image, or _Reject."""
+        p, cam = self.p, self._cam_in
+        if cam is not None and cam.width and cam.height and (cam.width, cam.height) != (w, h):
+            raise _Reject("camera_info_size_mismatch",
+                          f"camera_info_in is {cam.width}x{cam.height}, the images are {w}x{h}")
+        use_cam = cam is not None and (cam.k[2] != 0 or cam.k[5] != 0)
+        cx = p["principal_point_x"] if p["principal_point_x"] >= 0 else cam.k[2] if use_cam else (w - 1) / 2.0
+        cy = p["principal_point_y"] if p["principal_point_y"] >= 0 else cam.k[5] if use_cam else (h - 1) / 2.0
+        if not (0 <= cx <= w - 1 and 0 <= cy <= h - 1):
+            raise _Reject("principal_point_outside",
+                          f"principal point ({cx}, {cy}) is outside the {w}x{h} image")
+        if cam is not None and cam.distortion_model:
+            return float(cx), float(cy), [float(v) for v in cam.d], cam.distortion_model, [float(v) for v in cam.r]
+        return float(cx), float(cy), None, None, None
+
+    def _camera_info(self, focal: float, w: int, h: int, header):
+        cx, cy, d, model, r = self._intrinsics(w, h)
+        info = camera_info(focal, cx, cy, w, h, header)
+        if model is not None:
+            info.distortion_model, info.d = model, d
+            if any(r):
+                info.r = r
+        return info
+
+    def _on_camera_info_in(self, msg: CameraInfo) -> None:
+        with self._lock:
+            self._cam_in = msg
+        if any(v != 0 for v in msg.d) and not self._warned_distortion:
+            self._warned_distortion = True
+            self.get_logger().warning(
+                f"fcop_node: camera_info_in has non-zero distortion ({msg.distortion_model} D={list(msg.d)}): fCOP "
+                "assumes a pinhole camera, feed it rectified images; the output keeps D and the model")
+
+    # ----- input side: cheap, never waits for the estimator
     def _on_image(self, index: int, msg: Image) -> None:
         stamp = stamp_ns(msg)
         with self._lock:
             self.received += 1
             before = Counter(self.sync.stats.dropped)
+            before_inputs = Counter(self.sync.stats.per_input)
             resets = self.sync.stats.resets
             sets = self.sync.add(index, stamp, msg)
+            accepted, outliers = self.sync.accepted, self.sync.outliers_dropped
             new_drops = self.sync.stats.dropped - before
+            new_inputs = self.sync.stats.per_input - before_inputs
             jumped = self.sync.stats.resets != resets
             if jumped:  # before the new frames reach the worker
-                self.window.reset()
-                self.rejected["sync_time_jump_reset"] += len(self._frames)
-                self._frames.clear()
+                self._reset_locked()
             for stamp_set, msgs in sets:
-                if len(self._frames) >= self.p["queue_size"]:
-                    self._frames.popleft()
+                if self._slot is not None:
                     self.handoff_dropped += 1
-                    self.rejected["estimator_busy"] += 1  # under self._lock here
-                self._frames.append((stamp_set, msgs))
-                self._arrivals.append(time.monotonic())
+                    self.rejected["estimator_busy"] += 1
+                    self._throttle.warn("estimator_busy", "fcop_node: the estimator is slower than the input: "
+                                                          "skipped a frame (it works on the newest one)")
+                self._slot = (stamp_set, msgs)
             if sets:
                 self._cv.notify()
+            for i, stamps, ref in outliers:
+                self.rejected[f"outlier_stamp_{INPUTS[i]}"] += len(stamps)
+        for i, stamps, ref in outliers:
+            self._throttle.warn(f"outlier_{i}", f"fcop_node: dropped {len(stamps)} {INPUTS[i]} message(s) with an "
+                                                f"outlier stamp ({', '.join(_sec(s) for s in stamps)}; the "
+                                                f"{INPUTS[i]} stamps before were at {_sec(ref)})")
+        for stamp_set, msgs in sets:
+            self._check_frame_ids(msgs)
+        for i, s, m in accepted:
+            if i == 0:
+                self._answer_depth(s, m)
         if jumped:
             self._throttle.warn("time_jump", "fcop_node: time jumped back (looped bag?): synchroniser and "
                                              "window reset")
         for reason, n in new_drops.items():
+            if reason == "outlier_stamp":  # counted per input above
+                continue
             self._reject("sync_" + reason, n)
-            if reason != "time_jump_reset":
-                self._throttle.warn("sync_" + reason, f"fcop_node: dropped {n} input message(s) in the "
-                                                      f"synchroniser: {reason.replace('_', ' ')}")
+            if reason == "time_jump_reset":
+                continue
+            which = ", ".join(f"{INPUTS[i]} {k}" for (r, i), k in sorted(new_inputs.items()) if r == reason)
+            self._throttle.warn("sync_" + reason, f"fcop_node: dropped {n} message(s) in the synchroniser: "
+                                                  f"{reason.replace('_', ' ')} ({which})")
 
-    # ----- worker thread: conversions, estimation, publishing
+    def _check_frame_ids(self, msgs) -> None:
+        ids = [m.header.frame_id for m in msgs]
+        if not all(ids) or len(set(ids)) > 1:
+            reason = "frame_id_empty" if not all(ids) else "frame_id_mismatch"
+            with self._lock:
+                self.warnings[reason] += 1
+            self._throttle.warn(reason, "fcop_node: the inputs of one frame name different or empty frame_ids ("
+                                + ", ".join(f"{n} {i!r}" for n, i in zip(INPUTS, ids))
+                                + "): the outputs use the depth image's")
+
+    def _answer_depth(self, stamp: int, msg: Image) -> None:
+        """Publish the CameraInfo of one depth image with the current estimate, if there is one."""
+        with self._pub_lock:
+            if stamp in self._answered:
+                return
+            est = self._estimate
+            if est is None or (msg.width, msg.height) != (est.width, est.height):
+                self._remember(self._unanswered, stamp)
+                return
+            try:
+                info = self._camera_info(est.focal, est.width, est.height, msg.header)
+            except _Reject:
+                self._remember(self._unanswered, stamp)
+                return
+            self._publish_info(stamp, info, est.window, self._last_objects)
+
+    @staticmethod
+    def _remember(od: OrderedDict, stamp: int, keep: int = 256) -> None:
+        od[stamp] = True
+        while len(od) > keep:
+            od.popitem(last=False)
+
+    def _publish_info(self, stamp: int, info: CameraInfo, win, objects) -> None:
+        """Under self._pub_lock."""
+        self.pub_info.publish(info)
+        self.pub_latest.publish(info)
+        self.camera_info_published += 1
+        self._remember(self._answered, stamp)
+        self._unanswered.pop(stamp, None)
+        self._last_info_stamp = max(self._last_info_stamp, stamp)
+        self.last = (stamp, win, objects, info)
+
+    # ----- worker thread: conversions, estimation, poses
     def _work(self) -> None:
         while True:
             with self._cv:
-                while not self._frames and not self._stop:
+                while self._slot is None and not self._stop:
                     self._cv.wait(0.5)
                 if self._stop:
                     return
-                stamp, msgs = self._frames.popleft()
-                self._busy = True
+                (stamp, msgs), self._slot = self._slot, None
+                generation = self._generation
+                self._busy_since = self._now()
             try:
-                self.process(stamp, msgs)
+                self.process(stamp, msgs, generation)
             except Exception as exc:  # the node must outlive any single bad frame
                 self._reject("exception")
                 self._throttle.warn("exception", f"fcop_node: frame {stamp} failed: {type(exc).__name__}: {exc}")
             finally:
                 with self._lock:
-                    self._busy = False
+                    self._busy_since = None
+                    self._last_done = self._now()
                     self.processed += 1
 
     def _reject(self, reason: str, n: int = 1) -> None:
@@ -264,10 +544,11 @@ class FcopNode(Node):
     def idle(self) -> bool:
         """True when no frame is waiting or being estimated (used by replay and tests)."""
         with self._lock:
-            return not self._frames and not self._busy
+            return self._slot is None and self._busy_since is None
 
-    def process(self, stamp: int, msgs) -> bool:
-        """Estimate one synchronised frame and publish; returns True when something was published."""
+    def process(self, stamp: int, msgs, generation: int | None = None) -> bool:
+        """Estimate one synchronised frame, update the window and publish the frame's poses and
+        markers; returns True when the window has a publishable estimate afterwards."""
         t0 = time.perf_counter()
         depth_msg, nocs_msg, mask_msg = msgs
         p = self.p
@@ -285,8 +566,15 @@ class FcopNode(Node):
                                                  f"{depth.shape[::-1]}, nocs {nocs.shape[1::-1]}, mask {mask.shape[::-1]}")
             return False
         h, w = depth.shape
-        cx = p["principal_point_x"] if p["principal_point_x"] >= 0 else (w - 1) / 2.0
-        cy = p["principal_point_y"] if p["principal_point_y"] >= 0 else (h - 1) / 2.0
+        try:
+            with self._lock:
+                cx, cy, _, _, _ = self._intrinsics(w, h)
+        except _Reject as exc:
+            self._reject(exc.reason)
+            self._throttle.warn(exc.reason, f"fcop_node: rejected frame: {exc}")
+            return False
+        if p["nocs_convention"] == "nocs_dataset":
+            nocs = to_fcop_convention(nocs)
         est = estimate_focal(depth, nocs, mask, (cx, cy), triplets_per_object=p["triplets_per_object"],
                              noise_bound=p["noise_bound"], bound_mode=p["noise_bound_mode"],
                              focal_range=(p["focal_min"], p["focal_max"]), min_object_pixels=p["min_object_pixels"],
@@ -294,90 +582,231 @@ class FcopNode(Node):
         if est.focal is None:
             self._reject("no_evidence")
             self._throttle.warn("no_evidence", f"fcop_node: frame without focal evidence: {est.reason}")
+        if est.mirrored:
+            with self._lock:
+                self.rejected["mirrored_nocs"] += len(est.mirrored)
+            self._throttle.warn("mirrored_nocs", f"fcop_node: the NOCS of instance(s) {est.mirrored} fit their shape "
+                                                 "only as a mirror image: is the nocs image's channel order right "
+                                                 "(rgb8 vs bgr8), or its axis convention (parameter nocs_convention)? "
+                                                 "The focal length is unaffected; no pose is published for them")
+        resized = None
         with self._lock:
-            win = self.window.add(est, stamp * 1e-9)
+            if generation is not None and generation != self._generation:
+                return False  # taken before a reset
+            if self._size != (w, h):
+                resized, self._size = self._size, (w, h)
+                if resized is not None:
+                    self.window.reset()
+                    self._history.clear()
+            win = self._add_to_window(_light(est), stamp * 1e-9)
+            self._update_estimate_locked(win)
+            ready = self._estimate
+            self.last_estimate = est
+            self._proc_times.append(time.perf_counter() - t0)
+        if resized is not None:
+            self.get_logger().info(f"fcop_node: image size changed from {resized[0]}x{resized[1]} to {w}x{h}: "
+                                   "new focal window")
         if win.changed:
             self.get_logger().info(f"fcop_node: focal length changed (zoom?): window restarted at {win.focal}")
-        with self._lock:
-            self._proc_times.append(time.perf_counter() - t0)
-        if win.focal is None:
+        if ready is None:
             return False
-        header = depth_msg.header
-        info = camera_info(win.focal, cx, cy, w, h, header)
-        self.pub_info.publish(info)  # first: the pose work below does not delay it
-        self.pub_latest.publish(info)
+        with self._pub_lock:  # this frame's depth image arrived before there was an estimate: answer it now
+            if stamp in self._unanswered and stamp > self._last_info_stamp:
+                try:
+                    self._publish_info(stamp, self._camera_info(ready.focal, w, h, depth_msg.header), win, [])
+                except _Reject:
+                    pass
         objects = []
         if p["publish_poses"] or p["publish_markers"]:
             # Poses at the window's focal length: steadier than the frame's own.
-            objects = est.poses_at(win.focal) if est.focal is not None else []
+            objects = est.poses_at(ready.focal) if est.focal is not None else []
             poses = object_poses(objects)  # one quaternion conversion for both messages
             if p["publish_poses"]:
-                self.pub_poses.publish(pose_array(objects, header, poses))
+                self.pub_poses.publish(pose_array(objects, depth_msg.header, poses))
             if p["publish_markers"]:
-                self.pub_markers.publish(marker_array(objects, header, poses=poses))
-        self.last = (stamp, win, objects, info)
-        self.published += 1
+                self.pub_markers.publish(marker_array(objects, depth_msg.header, poses=poses))
+        with self._pub_lock:
+            self._last_objects = objects
+            if self.last is not None and self.last[0] == stamp:
+                self.last = (stamp, self.last[1], objects, self.last[3])
+        with self._lock:
+            self.published += 1
         return True
 
-    # ----- services and diagnostics
+    # ----- services
+    def _latched_publisher(self):
+        latched = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        return self.create_publisher(CameraInfo, "~/latest_camera_info", latched)
+
     def _on_reset(self, request, response):
         with self._lock:
-            self.window.reset()
-            self.sync.reset()
-            self._frames.clear()
+            self._reset_locked()
+            self.sync.reset(clocks=True)
+        with self._pub_lock:  # a new publisher: late joiners get nothing from before the reset
+            self.destroy_publisher(self.pub_latest)
+            self.pub_latest = self._latched_publisher()
+            self._last_info_stamp = -1
         response.success = True
-        response.message = "focal window, synchroniser and queue cleared"
-        self.get_logger().info("fcop_node: reset by service")
+        response.message = "focal window, synchroniser, hand-off and latest_camera_info cleared"
+        self._throttle.info("reset", "fcop_node: reset by service")
         return response
 
-    def publish_diagnostics(self) -> None:
-        win = self.window.current
+    def calibration_path(self) -> str:
+        path = self.p["calibration_file"] or os.path.join("~", ".ros", "camera_info", f"{self.p['camera_name']}.yaml")
+        return os.path.expanduser(path)
+
+    def _on_save_calibration(self, request, response):
+        with self._lock:
+            est, win = self._estimate, self.window.current
+            p = dict(self.p)
+        response.success = False
+        std = getattr(win, "std_rel", None)
+        if win.focal is None:
+            response.message = f"no focal estimate yet: {win.reason}"
+        elif std is None:
+            response.message = "the focal estimate has no uncertainty yet"
+        elif est is None:
+            response.message = f"std_rel {std:.4f} is above max_uncertainty {p['max_uncertainty']}"
+        if est is None:
+            self.get_logger().warning(f"fcop_node: calibration not saved: {response.message}")
+            return response
+        try:
+            with self._lock:
+                info = self._camera_info(est.focal, est.width, est.height, None)
+        except _Reject as exc:
+            response.message = str(exc)
+            return response
+        path = self.calibration_path()
+        try:
+            os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+            tmp = f"{path}.tmp{os.getpid()}"
+            with open(tmp, "w") as fh:
+                fh.write(calibration_yaml(info, p["camera_name"]))
+            os.replace(tmp, path)
+        except OSError as exc:
+            response.message = f"cannot write {path}: {exc.strerror or exc}"
+            self.get_logger().error(f"fcop_node: calibration not saved: {response.message}")
+            return response
+        response.success = True
+        response.message = f"saved focal {est.focal:.2f} px (std_rel {est.std_rel:.4f}) to {path}"
+        if self.set_info_client is not None:
+            if self.set_info_client.service_is_ready():
+                self.set_info_client.call_async(SetCameraInfo.Request(camera_info=info)).add_done_callback(
+                    self._on_set_camera_info_done)
+                response.message += f"; sent to {self.set_info_client.srv_name}"
+            else:
+                response.message += f"; {self.set_info_client.srv_name} is not available"
+        self.get_logger().info(f"fcop_node: {response.message}")
+        return response
+
+    def _on_set_camera_info_done(self, future) -> None:
+        res = future.result()
+        if res is None or not res.success:
+            self.get_logger().error(f"fcop_node: {self.set_info_client.srv_name} refused the calibration: "
+                                    f"{getattr(res, 'status_message', 'no answer')}")
+        else:
+            self.get_logger().info(f"fcop_node: {self.set_info_client.srv_name} took the calibration")
+
+    # ----- diagnostics
+    def diagnostic_status(self) -> DiagnosticStatus:
+        """The node's status now (what publish_diagnostics sends)."""
+        now = self._now()
+        with self._lock:  # the worker thread updates these while we read
+            win = self.window.current
+            est = self._estimate
+            fill = f"{len(self.window)}/{self.p['window_frames']}"
+            p = dict(self.p)
+            times = np.array(self._proc_times) * 1000 if self._proc_times else np.zeros(1)
+            rejected = dict(self.rejected)
+            warnings = dict(self.warnings)
+            matched, processed, skipped = self.sync.stats.matched, self.processed, self.handoff_dropped
+            busy_for = None if self._busy_since is None else now - self._busy_since
+            age = None if self._last_done is None else now - self._last_done
+            sync_dropped = self.sync.stats.dropped_total
+        self._samples.append((now, matched, processed, skipped))
+        while len(self._samples) > 1 and now - self._samples[1][0] >= 5.0:
+            self._samples.popleft()
+        t0, m0, p0, s0 = self._samples[0]
+        span = now - t0
+        rate = (matched - m0) / span if span > 0 else 0.0
+        est_rate = (processed - p0) / span if span > 0 else 0.0
+        std = getattr(win, "std_rel", None)
         st = DiagnosticStatus()
         st.name = f"{self.get_name()}: focal estimate"
         st.hardware_id = self.get_fully_qualified_name()
-        if win.focal is None:
+        if busy_for is not None and busy_for > p["max_estimate_age"]:
+            st.level = DiagnosticStatus.ERROR
+            st.message = (f"estimator stalled: busy with one frame for {busy_for:.1f} s (max_estimate_age "
+                          f"{p['max_estimate_age']} s); CameraInfo carries an estimate {age or 0:.1f} s old")
+        elif win.focal is None:
             st.level, st.message = DiagnosticStatus.WARN, f"no focal estimate yet: {win.reason}"
-        elif win.std_rel is None or win.std_rel > 0.05:
-            st.level, st.message = DiagnosticStatus.WARN, f"focal {win.focal:.1f} px, uncertain (std_rel {win.std_rel})"
+        elif est is None:
+            st.level = DiagnosticStatus.WARN
+            st.message = (f"focal {win.focal:.1f} px held back: std_rel "
+                          f"{'unknown' if std is None else f'{std:.4f}'} above max_uncertainty {p['max_uncertainty']}")
+        elif skipped - s0 > processed - p0:
+            st.level = DiagnosticStatus.WARN
+            st.message = (f"focal {win.focal:.1f} px; estimator behind: skipped {skipped - s0} of "
+                          f"{matched - m0} frames in the last {span:.1f} s")
         else:
             st.level, st.message = DiagnosticStatus.OK, f"focal {win.focal:.1f} px"
-        now = time.monotonic()
-        with self._lock:  # the worker thread appends to these while we read
-            arrivals = list(self._arrivals)
-            times = np.array(self._proc_times) * 1000 if self._proc_times else np.zeros(1)
-            rejected = dict(self.rejected)
-        rate = sum(1 for t in arrivals if now - t <= 5.0) / 5.0
         values = {
             "focal_px": "" if win.focal is None else f"{win.focal:.3f}",
-            "std_rel": "" if win.std_rel is None else f"{win.std_rel:.4f}",
+            "std_rel": "" if std is None else f"{std:.5f}",
+            "max_uncertainty": str(p["max_uncertainty"]),
             "support_votes": str(win.support),
-            "window_fill": f"{len(self.window)}/{self.p['window_frames']}",
+            "window_fill": fill,
             "frame_rate_hz": f"{rate:.2f}",
-            "frames_processed": str(self.processed),
-            "camera_info_published": str(self.published),
-            "sync_matched": str(self.sync.stats.matched),
-            "sync_dropped": str(self.sync.stats.dropped_total),
+            "estimator_rate_hz": f"{est_rate:.2f}",
+            "estimate_age_s": "" if age is None else f"{age:.2f}",
+            "estimator_busy_s": "" if busy_for is None else f"{busy_for:.2f}",
+            "frames_processed": str(processed),
+            "frames_skipped": str(skipped),
+            "camera_info_published": str(self.camera_info_published),
+            "sync_matched": str(matched),
+            "sync_dropped": str(sync_dropped),
             "processing_ms_median": f"{np.median(times):.2f}",
             "processing_ms_max": f"{np.max(times):.2f}",
         }
         values.update({f"rejected_{k}": str(v) for k, v in sorted(rejected.items())})
+        values.update({f"warning_{k}": str(v) for k, v in sorted(warnings.items())})
         st.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        return st
+
+    def publish_diagnostics(self) -> DiagnosticArray:
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
-        msg.status = [st]
+        msg.status = [self.diagnostic_status()]
         self.pub_diag.publish(msg)
+        return msg
 
     def destroy_node(self):
-        with self._cv:
-            self._stop = True
-            self._cv.notify_all()
-        if self._worker.is_alive() and threading.current_thread() is not self._worker:
-            self._worker.join(timeout=5.0)
+        if self._worker is not None:
+            with self._cv:
+                self._stop = True
+                self._cv.notify_all()
+            if self._worker.is_alive() and threading.current_thread() is not self._worker:
+                self._worker.join(timeout=5.0)
         return super().destroy_node()
 
 
+def to_fcop_convention(nocs: np.ndarray) -> np.ndarray:
+    """NOCS of the NOCS dataset's convention (z flipped) in this package's: z = 1 - z on every
+    pixel with a prediction (all-zero pixels stay all-zero: no prediction)."""
+    out = np.array(nocs, dtype=np.float32, copy=True)
+    valid = np.any(out != 0, axis=2)
+    out[..., 2] = np.where(valid, 1.0 - out[..., 2], out[..., 2])
+    return out
+
+
+def _sec(stamp) -> str:
+    return "none" if stamp is None else f"{stamp / 1e9:.3f} s"
+
+
 def main(args=None) -> int:
-    """Entry point of ``ros2 run fcop_ros fcop_node``: spin until Ctrl-C or external shutdown."""
+    """Entry point of ``ros2 run fcop_ros fcop_node``: spin until Ctrl-C or external shutdown.
+    Exit codes: 0 after a clean shutdown, 2 for a parameter it cannot run with (one line on stderr)."""
     rclpy.init(args=args)
     node = None
     try:
@@ -386,6 +815,9 @@ def main(args=None) -> int:
         node = FcopNode()
         executor.add_node(node)
         executor.spin()
+    except ParameterError as exc:
+        print(f"fcop_node: {exc}", file=sys.stderr)
+        return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

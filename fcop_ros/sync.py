@@ -7,29 +7,48 @@ emitted; otherwise the oldest of them can never be matched (every other input al
 only newer messages past the slop) and is dropped. So each message is used at most once, sets
 come out in increasing stamp order, and nothing waits longer than the slowest input.
 
-A message older than the last emitted set is dropped as late, unless it is older by more than
-``reset_after`` (a time jump back, e.g. a looped bag): then all queues are cleared and the
-synchroniser starts again. A second message with the same stamp on one input is dropped as a
-duplicate.
+Outlier stamps. Before a message reaches its queue, its stamp is compared with the input's
+previous accepted stamp: a stamp more than ``reset_after`` seconds back, or further ahead than
+``max(reset_after, 10 x the input's usual interval)``, is a jump. A jump is held, not used: if
+the input's next messages return to its old clock, the held ones were isolated outliers (a
+frame stamped 0 or far in the future) and are dropped and counted per input
+(``stats.outliers``); if ``confirm`` messages in a row continue the jump (increasing stamps), or
+another input has already arrived there, the jump is real (a looped bag, a camera that paused)
+and the held messages are used. A real jump back (older than the last emitted set by more than
+``reset_after``) clears all queues and starts again (``stats.resets``), as does
+:meth:`reset`. A message slightly older than the last emitted set is dropped as late; a second
+message with the same stamp on one input as a duplicate.
 """
 from __future__ import annotations
 
 import bisect
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
+
+import numpy as np
 
 
 @dataclass
 class SyncStats:
-    """Counts since start: sets emitted, messages dropped by reason, resets."""
+    """Counts since start: sets emitted, messages dropped by reason (``dropped``) and by
+    (reason, input index) (``per_input``), outlier stamps per input index, resets."""
 
     matched: int = 0
     dropped: Counter = field(default_factory=Counter)
+    per_input: Counter = field(default_factory=Counter)
+    outliers: Counter = field(default_factory=Counter)
     resets: int = 0
 
     @property
     def dropped_total(self) -> int:
         return sum(self.dropped.values())
+
+    def drop(self, reason: str, index: int | None = None, n: int = 1) -> None:
+        if n <= 0:
+            return
+        self.dropped[reason] += n
+        if index is not None:
+            self.per_input[(reason, index)] += n
 
 
 class StampSynchronizer:
@@ -39,50 +58,146 @@ class StampSynchronizer:
         n_inputs: number of streams (e.g. 3: depth, NOCS, mask).
         queue_size: messages kept per stream while waiting for the others.
         slop: largest stamp difference within a set, in seconds (0 = exact).
-        reset_after: a stamp this many seconds older than the last set resets the synchroniser.
+        reset_after: a stamp this many seconds away from its input's clock is a jump (see the
+            module docstring); a confirmed jump this far back resets the synchroniser.
+        confirm: messages in a row on one input that make a jump real.
     """
 
-    def __init__(self, n_inputs: int, queue_size: int = 10, slop: float = 0.0, reset_after: float = 1.0):
-        if n_inputs < 1 or queue_size < 1 or slop < 0 or reset_after <= 0:
-            raise ValueError("StampSynchronizer: need n_inputs >= 1, queue_size >= 1, slop >= 0, reset_after > 0")
+    def __init__(self, n_inputs: int, queue_size: int = 10, slop: float = 0.0, reset_after: float = 1.0,
+                 confirm: int = 3):
+        if n_inputs < 1 or queue_size < 1 or slop < 0 or reset_after <= 0 or confirm < 1:
+            raise ValueError("StampSynchronizer: need n_inputs >= 1, queue_size >= 1, slop >= 0, reset_after > 0, "
+                             "confirm >= 1")
         self.n = int(n_inputs)
         self.queue_size = int(queue_size)
         self.slop_ns = int(round(slop * 1e9))
         self.reset_ns = int(round(reset_after * 1e9))
+        self.confirm = int(confirm)
         self.stats = SyncStats()
         self._queues: list[list] = [[] for _ in range(self.n)]
         self._last: int | None = None
+        self._ref: list[int | None] = [None] * self.n          # last accepted stamp per input
+        self._steps: list[deque] = [deque(maxlen=9) for _ in range(self.n)]  # recent forward steps
+        self._held: list[list] = [[] for _ in range(self.n)]  # a jump waiting for confirmation
+        #: Filled by each :meth:`add`: messages that passed the stamp check, as (input, stamp, msg),
+        #: and outliers dropped, as (input, [stamps], the input's stamp before them).
+        self.accepted: list[tuple[int, int, object]] = []
+        self.outliers_dropped: list[tuple[int, list[int], int | None]] = []
 
-    def reset(self) -> None:
-        """Forget all queued messages and the last emitted stamp."""
+    def configure(self, queue_size: int | None = None, slop: float | None = None) -> None:
+        """Change the queue bound and the slop, keeping what is queued (oldest dropped past the bound)."""
+        if queue_size is not None:
+            if queue_size < 1:
+                raise ValueError("queue_size must be >= 1")
+            self.queue_size = int(queue_size)
+            for i, q in enumerate(self._queues):
+                while len(q) > self.queue_size:
+                    q.pop(0)
+                    self.stats.drop("queue_full", i)
+        if slop is not None:
+            if slop < 0:
+                raise ValueError("slop must be >= 0")
+            self.slop_ns = int(round(slop * 1e9))
+
+    def reset(self, clocks: bool = False) -> None:
+        """Forget all queued messages and the last emitted stamp; with ``clocks`` also each
+        input's stamp history and held messages (a fresh start)."""
         self._queues = [[] for _ in range(self.n)]
         self._last = None
+        if clocks:
+            self._ref = [None] * self.n
+            self._steps = [deque(maxlen=9) for _ in range(self.n)]
+            self._held = [[] for _ in range(self.n)]
 
     def pending(self) -> int:
         return sum(len(q) for q in self._queues)
 
+    def held(self) -> int:
+        """Messages held while a stamp jump waits for confirmation."""
+        return sum(len(h) for h in self._held)
+
+    # ----- stamp checks
+    def _ahead_ns(self, index: int) -> float:
+        steps = self._steps[index]
+        if len(steps) < 2:
+            return float("inf")  # the input's rate is not known yet
+        return max(self.reset_ns, 10 * float(np.median(steps)))
+
+    def _fits(self, index: int, stamp: int) -> bool | None:
+        """Whether ``stamp`` continues input ``index``'s clock (None: no clock yet)."""
+        ref = self._ref[index]
+        if ref is None:
+            return None
+        return ref - self.reset_ns <= stamp <= ref + self._ahead_ns(index)
+
+    def _drop_held(self, index: int) -> None:
+        held = self._held[index]
+        if held:
+            self.stats.outliers[index] += len(held)
+            self.stats.drop("outlier_stamp", index, len(held))
+            self.outliers_dropped.append((index, [s for s, _ in held], self._ref[index]))
+            held.clear()
+
+    def _note(self, index: int, stamp: int, jump: bool) -> None:
+        ref = self._ref[index]
+        if ref is not None and stamp > ref and not jump:
+            self._steps[index].append(stamp - ref)
+        if ref is None or stamp > ref or jump:
+            self._ref[index] = stamp
+
     def add(self, index: int, stamp_ns: int, msg) -> list[tuple[int, list]]:
         """Offer one message of stream ``index``; return the sets completed by it, oldest first,
-        each as (stamp of its first stream, [message per stream])."""
-        stamp_ns = int(stamp_ns)
+        each as (stamp of its first stream, [message per stream]). See also :attr:`accepted`
+        and :attr:`outliers_dropped`."""
+        stamp = int(stamp_ns)
+        self.accepted, self.outliers_dropped = [], []
+        fits = self._fits(index, stamp)
+        others = [self._fits(j, stamp) for j in range(self.n) if j != index and self._ref[j] is not None]
+        if fits is None:
+            fits = not others or any(others)
+        if fits:
+            self._drop_held(index)  # the input is back on its clock: what was held were outliers
+            self._note(index, stamp, False)
+            return self._accept(index, stamp, msg)
+        held = self._held[index]
+        if held and held[-1][0] < stamp <= held[-1][0] + min(self._ahead_ns(index), self.reset_ns * 1000):
+            held.append((stamp, msg))
+        else:
+            self._drop_held(index)
+            held.append((stamp, msg))
+        if len(held) < self.confirm and not any(others):
+            return []
+        # A real jump: use what was held, in order.
+        out = []
+        release, self._held[index] = list(held), []
+        for k, (s, m) in enumerate(release):
+            self._note(index, s, k == 0)
+            out += self._accept(index, s, m)
+        return out
+
+    # ----- matching
+    def _accept(self, index: int, stamp_ns: int, msg) -> list[tuple[int, list]]:
         if self._last is not None and stamp_ns <= self._last:
             if stamp_ns < self._last - self.reset_ns:
-                self.stats.dropped["time_jump_reset"] += self.pending()
+                pending = self.pending()
+                self.stats.drop("time_jump_reset", None, pending)
                 self.stats.resets += 1
                 self.reset()
             else:
-                self.stats.dropped["late"] += 1
+                self.stats.drop("late", index)
+                self.accepted.append((index, stamp_ns, msg))  # a good message, only too late to match
                 return []
         q = self._queues[index]
         keys = [s for s, _ in q]
         pos = bisect.bisect_left(keys, stamp_ns)
         if pos < len(q) and q[pos][0] == stamp_ns:
-            self.stats.dropped["duplicate"] += 1
+            self.stats.drop("duplicate", index)
             return []
+        self.accepted.append((index, stamp_ns, msg))
         q.insert(pos, (stamp_ns, msg))
         if len(q) > self.queue_size:
             q.pop(0)
-            self.stats.dropped["queue_full"] += 1
+            self.stats.drop("queue_full", index)
         return self._match()
 
     def _match(self) -> list[tuple[int, list]]:
@@ -96,6 +211,7 @@ class StampSynchronizer:
                 self.stats.matched += 1
                 out.append((heads[0], msgs))
             else:
-                self._queues[heads.index(lo)].pop(0)
-                self.stats.dropped["unmatched"] += 1
+                i = heads.index(lo)
+                self._queues[i].pop(0)
+                self.stats.drop("unmatched", i)
         return out

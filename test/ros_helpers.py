@@ -2,13 +2,20 @@
 from __future__ import annotations
 
 import contextlib
+import threading
 import time
 
 import numpy as np
+import pytest
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from geometry_msgs.msg import PoseArray
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
+from visualization_msgs.msg import MarkerArray
 
 from msg_adapters import depth_to_image, mask_to_image, nocs_to_image, stamp_ns  # noqa: F401 (re-exported)
 
@@ -63,3 +70,100 @@ class Recorder:
 
 def as_array(values) -> np.ndarray:
     return np.asarray(values, dtype=np.float64)
+
+
+class Harness:
+    """fcop_node plus a tester node that publishes inputs and records outputs."""
+
+    def __init__(self, ctx, executor, node_args=None, inputs=("depth", "nocs", "mask"), **node_kwargs):
+        from fcop_ros.node import FcopNode
+        self.node = FcopNode(context=ctx, cli_args=node_args, **node_kwargs)
+        self.tester = Node("tester", context=ctx)
+        self.pubs = [self.tester.create_publisher(Image, t, qos_profile_sensor_data) for t in inputs]
+        self.info = Recorder(self.tester, CameraInfo, "camera_info")
+        self.poses = Recorder(self.tester, PoseArray, "object_poses")
+        self.markers = Recorder(self.tester, MarkerArray, "object_markers")
+        self.ex = executor
+        executor.add_node(self.node)
+        executor.add_node(self.tester)
+        assert spin_until(executor, lambda: all(p.get_subscription_count() for p in self.pubs), 10)
+
+    def send(self, msgs, which=(0, 1, 2)):
+        for i in which:
+            self.pubs[i].publish(msgs[i])
+
+    def settle(self, processed=None, timeout=20.0):
+        """Spin until the estimator has taken (or skipped) every matched frame and is idle."""
+        node = self.node
+        if processed is None:
+            return spin_until(self.ex, lambda: node.received and node.processed + node.handoff_dropped
+                              >= node.sync.stats.matched and node.idle(), timeout)
+        return spin_until(self.ex, lambda: node.processed >= processed and node.idle(), timeout)
+
+    def frame(self, msgs):
+        """Send one frame and spin until the estimator has processed it."""
+        target = self.node.processed + 1
+        self.send(msgs)
+        return self.settle(target)
+
+    def close(self):
+        self.node.destroy_node()
+        self.tester.destroy_node()
+
+
+@pytest.fixture
+def harness():
+    """harness(args=None, **Harness kwargs): a fcop_node and a tester in a private context."""
+    made = []
+
+    def make(args=None, **kw):
+        ctx_mgr = ros_context(args)
+        ctx, ex = ctx_mgr.__enter__()
+        try:
+            h = Harness(ctx, ex, **kw)
+        except BaseException:
+            ctx_mgr.__exit__(None, None, None)
+            raise
+        made.append((h, ctx_mgr))
+        return h
+
+    yield make
+    for h, ctx_mgr in made:
+        h.close()
+        ctx_mgr.__exit__(None, None, None)
+
+
+def rotation_errors(poses_msg, markers_msg, frame) -> list:
+    """Rotation error in degrees of each published object pose against the frame's truth (the
+    markers carry the instance ids, in the order of the poses)."""
+    from scipy.spatial.transform import Rotation
+
+    from fcop_ros.core.pose import rotation_angle_deg
+    truth = {o.instance_id: o for o in frame.objects}
+    out = []
+    for pose, marker in zip(poses_msg.poses, markers_msg.markers[1:]):
+        q = pose.orientation
+        R = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+        out.append(rotation_angle_deg(R, truth[marker.id].rotation))
+    return out
+
+
+class Gate:
+    """Holds the node's estimator: once closed, every frame estimate waits until it is opened."""
+
+    def __init__(self, monkeypatch):
+        import fcop_ros.node as node_module
+        self.event = threading.Event()
+        self.event.set()
+        real = node_module.estimate_focal
+
+        def gated(*args, **kwargs):
+            self.event.wait(60)
+            return real(*args, **kwargs)
+        monkeypatch.setattr(node_module, "estimate_focal", gated)
+
+    def close(self):
+        self.event.clear()
+
+    def open(self):
+        self.event.set()

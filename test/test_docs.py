@@ -11,7 +11,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 def test_config_file_sets_every_parameter_to_its_default():
     with open(os.path.join(ROOT, "config", "fcop.yaml")) as fh:
-        params = yaml.safe_load(fh)["fcop_node"]["ros__parameters"]
+        params = yaml.safe_load(fh)["/**"]["ros__parameters"]  # any node name, any namespace
     assert set(params) == set(PARAMETERS)
     for name, (default, _, _) in PARAMETERS.items():
         assert params[name] == default and type(params[name]) is type(default), name
@@ -23,5 +23,5 @@ def test_readme_parameter_table_lists_every_parameter_with_its_default():
     for name, (default, _, _) in PARAMETERS.items():
         assert name in rows, name
         shown = rows[name].strip()
-        expected = str(default).lower() if isinstance(default, bool) else str(default)
+        expected = str(default).lower() if isinstance(default, bool) else str(default) if default != "" else '""'
         assert shown == expected, (name, shown, expected)

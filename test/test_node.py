@@ -4,9 +4,8 @@ import os
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from scipy.spatial.transform import Rotation
@@ -16,58 +15,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from conftest import BAD_CASES, clean_frame, corrupted
 from fcop_ros.core.pose import rotation_angle_deg
-from fcop_ros.node import FcopNode
-from ros_helpers import Recorder, frame_messages, ros_context, spin_until, stamp_ns
+from ros_helpers import Gate, Recorder, frame_messages, harness, header, spin_until, stamp_ns  # noqa: F401
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config", "fcop.yaml")
 T0 = 1_700_000_000_000_000_000
 DT = 33_333_333
-
-
-class Harness:
-    """fcop_node plus a tester node that publishes inputs and records outputs."""
-
-    def __init__(self, ctx, executor, node_args=None, inputs=("depth", "nocs", "mask"), **node_kwargs):
-        self.node = FcopNode(context=ctx, cli_args=node_args, **node_kwargs)
-        self.tester = Node("tester", context=ctx)
-        self.pubs = [self.tester.create_publisher(Image, t, qos_profile_sensor_data) for t in inputs]
-        self.info = Recorder(self.tester, CameraInfo, "camera_info")
-        self.poses = Recorder(self.tester, PoseArray, "object_poses")
-        self.markers = Recorder(self.tester, MarkerArray, "object_markers")
-        self.ex = executor
-        executor.add_node(self.node)
-        executor.add_node(self.tester)
-        assert spin_until(executor, lambda: all(p.get_subscription_count() for p in self.pubs), 10)
-
-    def send(self, msgs, which=(0, 1, 2)):
-        for i in which:
-            self.pubs[i].publish(msgs[i])
-
-    def settle(self, processed=None, timeout=20.0):
-        """Spin until the node has handled every published frame and is idle."""
-        target = self.node.sync.stats.matched if processed is None else processed
-        return spin_until(self.ex, lambda: self.node.processed >= target and self.node.idle(), timeout)
-
-    def close(self):
-        self.node.destroy_node()
-        self.tester.destroy_node()
-
-
-@pytest.fixture
-def harness():
-    made = []
-
-    def make(args=None, **kw):
-        ctx_mgr = ros_context(args)
-        ctx, ex = ctx_mgr.__enter__()
-        h = Harness(ctx, ex, **kw)
-        made.append((h, ctx_mgr))
-        return h
-
-    yield make
-    for h, ctx_mgr in made:
-        h.close()
-        ctx_mgr.__exit__(None, None, None)
 
 
 # Measured over this test's 12 moderate frames (seeds 0..11, focal drawn per scene, window of 30
@@ -92,6 +44,11 @@ def _camera_frames(n, focal, preset="moderate", first_seed=0):
 _FRAMES = {}
 
 
+def cam(k):
+    """Frame k of one camera: clean, 5 objects, focal 600 px (clean_frame(k) draws a focal per scene)."""
+    return clean_frame(k, 640, 480, 600.0)
+
+
 def test_camera_info_per_input_stamp_within_bound(harness):
     h = harness(parameter_overrides=[Parameter("seed", value=1)])
     frames = _camera_frames(12, 600.0)
@@ -100,8 +57,10 @@ def test_camera_info_per_input_stamp_within_bound(harness):
         stamp = T0 + k * DT
         h.send(frame_messages(fr, stamp))
         sent.append(stamp)
-        assert spin_until(h.ex, lambda: len(h.info) >= k + 1 and len(h.markers) >= k + 1, 20)
+        assert spin_until(h.ex, lambda: len(h.info) >= k + 1 and len(h.poses) >= k + 1 and len(h.markers) >= k + 1,
+                          20)
     assert [stamp_ns(m) for m in h.info.msgs] == sent
+    assert len(h.poses) == len(h.markers) == len(sent)  # zip below must not drop any
     rot, trans = [], []
     for info, poses, markers, fr in zip(h.info.msgs, h.poses.msgs, h.markers.msgs, frames):
         # REP-104
@@ -167,33 +126,48 @@ def test_runtime_parameter_changes(harness):
                               Parameter("sync_slop", value=0.02)])
     assert all(r.successful for r in ok)
     assert node.window.max_frames == 10 and node.sync.slop_ns == 20_000_000
+    # The node's own check, called as rclpy calls it: rclpy's descriptor would refuse the first
+    # two before the callback runs, which proves nothing about the node.
     bad = {
-        "window_frames": 0,            # below range
-        "noise_bound_mode": "fuzzy",   # not a choice
-        "sync_mode": "sometimes",
-        "focal_min": 30000.0,          # above focal_max
-        "queue_size": "five",          # wrong type
-        "noise_bound": 0.9,            # not a fraction in relative mode
+        "window_frames": (0, "[1, 1000]"),                       # below range
+        "queue_size": ("five", "an integer"),                    # wrong type
+        "noise_bound_mode": ("fuzzy", "one of relative, absolute"),  # not a choice
+        "sync_mode": ("sometimes", "one of exact, approximate"),
+        "focal_min": (30000.0, "below focal_max=20000.0"),       # above focal_max
+        "noise_bound": (0.9, "(0, 0.5]"),                        # not a fraction in relative mode
     }
-    for name, value in bad.items():
+    for name, (value, allowed) in bad.items():
+        res = node._on_set_parameters([Parameter(name, value=value)])
+        assert not res.successful and name in res.reason and repr(value) in res.reason \
+            and allowed in res.reason, (name, res.reason)
         res = node.set_parameters([Parameter(name, value=value)])[0]
         assert not res.successful and res.reason, name
     assert node.get_parameter("window_frames").value == 10 and node.p["sync_mode"] == "approximate"
+    assert node.p["focal_min"] == 50.0 and node.p["noise_bound"] == 0.05
     assert node.set_parameters([Parameter("focal_min", value=100.0)])[0].successful
 
 
-def test_reset_service_clears_window(harness):
+def test_reset_service_clears_window_and_the_latched_estimate(harness, capfd):
     h = harness()
     for k in range(3):
-        h.send(frame_messages(clean_frame(k), T0 + k * DT))
-        assert spin_until(h.ex, lambda: len(h.info) == k + 1, 20)
-    assert len(h.node.window) == 3
+        assert h.frame(frame_messages(cam(k), T0 + k * DT))
+    assert len(h.node.window) == 3 and spin_until(h.ex, lambda: len(h.info) == 3, 10)
     client = h.tester.create_client(Trigger, "/fcop_node/reset")
     assert client.wait_for_service(timeout_sec=5.0)
-    fut = client.call_async(Trigger.Request())
-    assert spin_until(h.ex, fut.done, 10)
-    assert fut.result().success and len(h.node.window) == 0
-    assert h.node.window.current.focal is None
+    for _ in range(10):  # a client calling in a loop must not flood the log
+        fut = client.call_async(Trigger.Request())
+        assert spin_until(h.ex, fut.done, 10)
+        assert fut.result().success
+    assert len(h.node.window) == 0 and h.node.window.current.focal is None
+    # A late joiner of ~/latest_camera_info gets nothing from before the reset ...
+    late = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    rec = Recorder(h.tester, CameraInfo, "/fcop_node/latest_camera_info", late)
+    assert spin_until(h.ex, lambda: rec.sub.get_publisher_count() == 1, 10)
+    # ... and the next estimate once there is one (the frame that gives it gets its CameraInfo).
+    assert h.frame(frame_messages(cam(5), T0 + 10 * DT))
+    assert spin_until(h.ex, lambda: len(rec) == 1, 10)
+    assert stamp_ns(rec.msgs[0]) == T0 + 10 * DT
+    assert capfd.readouterr().err.count("reset by service") == 1
 
 
 def test_latched_estimate_for_late_joiners(harness):
@@ -212,15 +186,21 @@ def test_diagnostics(harness):
     assert spin_until(h.ex, lambda: len(rec) >= 1, 10)
     st = rec.msgs[-1].status[0]
     assert st.name == "fcop_node: focal estimate" and st.level == st.WARN  # no evidence yet
-    h.send(frame_messages(clean_frame(2), T0))
-    assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
-    n = len(rec)
-    assert spin_until(h.ex, lambda: len(rec) > n, 10)
-    st = rec.msgs[-1].status[0]
-    values = {kv.key: kv.value for kv in st.values}
-    assert st.level == st.OK and abs(float(values["focal_px"]) / clean_frame(2).focal - 1) < 1e-3
-    for key in ("std_rel", "window_fill", "frame_rate_hz", "sync_dropped", "processing_ms_median"):
-        assert key in values
+    assert h.frame(frame_messages(clean_frame(2), T0))
+
+    def values(msg):
+        return {kv.key: kv.value for kv in msg.status[0].values}
+    # Wait for the first message built after the frame was processed (one built before may
+    # still be on its way), then check that one.
+    assert spin_until(h.ex, lambda: any(values(m)["frames_processed"] == "1" for m in rec.msgs), 10)
+    msg = next(m for m in rec.msgs if values(m)["frames_processed"] == "1")
+    st, v = msg.status[0], values(msg)
+    assert st.level == st.OK, st.message
+    assert abs(float(v["focal_px"]) / clean_frame(2).focal - 1) < 1e-3
+    assert 0 <= float(v["std_rel"]) <= h.node.p["max_uncertainty"]
+    for key in ("window_fill", "frame_rate_hz", "estimator_rate_hz", "estimate_age_s", "sync_dropped",
+                "processing_ms_median", "frames_skipped", "camera_info_published"):
+        assert key in v, key
 
 
 def test_mixed_encodings_work(harness):
@@ -237,7 +217,7 @@ def test_bad_content_never_publishes(harness, case):
     h = harness()
     h.send(frame_messages(corrupted(clean_frame(0), case), T0))
     assert h.settle(1)
-    assert len(h.info) == 0 and h.node.rejected["no_evidence"] == 1
+    assert h.node.camera_info_published == 0 and len(h.info) == 0 and h.node.rejected["no_evidence"] == 1
 
 
 def test_wrong_encoding_and_size_mismatch(harness):
@@ -254,32 +234,83 @@ def test_wrong_encoding_and_size_mismatch(harness):
     h.send((small[0], n2[1], n2[2]))
     assert h.settle(2)
     assert h.node.rejected["bad_encoding"] == 1 and h.node.rejected["size_mismatch"] == 1
-    assert len(h.info) == 0
+    assert h.node.camera_info_published == 0 and len(h.info) == 0
     # The node is alive and still estimates.
     h.send(frame_messages(fr, T0 + 2 * DT))
     assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
 
 
-def test_stamps_backwards_and_silent_topic(harness):
+def test_stamps_backwards_and_silent_topic(harness, capfd):
     h = harness()
     fr = clean_frame(0)
-    h.send(frame_messages(fr, T0 + 10 * DT))
-    assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
+    assert h.frame(frame_messages(fr, T0 + 10 * DT))
     h.send(frame_messages(fr, T0 + 5 * DT))  # slightly back: late, dropped
     assert spin_until(h.ex, lambda: h.node.rejected["sync_late"] == 3, 10)
-    assert len(h.info) == 1
+    assert h.node.sync.stats.matched == 1
     # One input silent: nothing is matched, the other queues stay bounded (drop oldest).
     seen = lambda: h.node.sync.pending() + h.node.rejected["sync_queue_full"]  # noqa: E731
     for k in range(12):
         h.send(frame_messages(fr, T0 + (20 + k) * DT), which=(0, 1))
         assert spin_until(h.ex, lambda: seen() == 2 * (k + 1), 10)  # one frame at a time: no DDS-side loss
     assert h.node.rejected["sync_queue_full"] == 14
-    assert len(h.info) == 1 and h.node.sync.pending() <= 2 * h.node.p["queue_size"]
-    # A big jump back (a looped bag) resets the synchroniser and the window, then works again.
-    h.send(frame_messages(fr, T0 - 100 * DT))
-    assert spin_until(h.ex, lambda: len(h.info) == 2, 20)
-    assert h.node.sync.stats.resets == 1 and len(h.node.window) == 1
-    assert stamp_ns(h.info.msgs[-1]) == T0 - 100 * DT
+    assert "in the synchroniser: queue full (depth 1)" in capfd.readouterr().err  # the log names the input
+    assert h.node.sync.stats.matched == 1 and h.node.sync.pending() <= 2 * h.node.p["queue_size"]
+    # A sustained jump back (a looped bag: three frames) resets the synchroniser and the window,
+    # and uses the frames it held while waiting for the confirmation.
+    for k in range(3):
+        h.send(frame_messages(fr, T0 - (100 - k) * DT))
+        assert spin_until(h.ex, lambda: h.node.received == 3 + 3 + 24 + 3 * (k + 1), 10)
+    assert h.settle()
+    assert h.node.sync.stats.resets == 1 and h.node.sync.stats.matched == 4
+    assert h.node.rejected["sync_time_jump_reset"] == 10  # the depth and NOCS waiting for a mask
+    assert h.node.rejected.total() == h.node.rejected["sync_late"] + h.node.rejected["sync_queue_full"] \
+        + h.node.rejected["estimator_busy"] + 10
+    assert h.node.window.current.focal is not None and len(h.node.window) + h.node.handoff_dropped == 3
+
+
+@pytest.mark.parametrize("bad", [0, T0 + 3600 * 10**9])  # stamped 0; an hour ahead
+def test_isolated_outlier_stamp_keeps_the_window(harness, capfd, bad):
+    h = harness()
+    for k in range(3):
+        assert h.frame(frame_messages(cam(k), T0 + k * DT))
+    h.send(frame_messages(cam(3), bad))
+    assert spin_until(h.ex, lambda: h.node.sync.held() == 3, 10)
+    assert h.frame(frame_messages(cam(4), T0 + 4 * DT))
+    assert len(h.node.window) == 4 and h.node.sync.stats.resets == 0
+    assert {k: v for k, v in h.node.rejected.items() if v} == {
+        "outlier_stamp_depth": 1, "outlier_stamp_nocs": 1, "outlier_stamp_mask": 1}
+    assert spin_until(h.ex, lambda: len(h.info) == 4, 10), ([stamp_ns(m) - T0 for m in h.info.msgs],
+                                                            h.node.camera_info_published, h.node.rejected)
+    assert bad not in [stamp_ns(m) for m in h.info.msgs]  # no CameraInfo with the bogus stamp
+    err = capfd.readouterr().err
+    assert "mask message(s) with an outlier stamp" in err and "depth message(s) with an outlier stamp" in err
+
+
+def test_only_the_mask_stamped_zero_is_named_and_never_resets(harness, capfd):
+    h = harness()
+    assert h.frame(frame_messages(cam(0), T0))
+    for k in range(1, 6):
+        d, n, m = frame_messages(cam(0), T0 + k * DT)
+        m.header.stamp.sec = m.header.stamp.nanosec = 0
+        h.send((d, n, m))
+        assert spin_until(h.ex, lambda: h.node.received == 3 * (k + 1), 10)
+    assert h.node.sync.stats.resets == 0 and len(h.node.window) == 1
+    assert h.node.rejected["outlier_stamp_mask"] == 4  # the fifth is still held
+    assert "mask message(s) with an outlier stamp" in capfd.readouterr().err
+
+
+def test_mismatched_and_empty_frame_ids_are_warned(harness, capfd):
+    h = harness()
+    d, n, m = frame_messages(clean_frame(4), T0)
+    n.header = header(T0, "nocs_frame")
+    assert h.frame((d, n, m))
+    d, n, m = frame_messages(clean_frame(4), T0 + DT)
+    m.header = header(T0 + DT, "")
+    assert h.frame((d, n, m))
+    assert h.node.warnings == {"frame_id_mismatch": 1, "frame_id_empty": 1}
+    err = capfd.readouterr().err
+    assert "nocs 'nocs_frame'" in err and "mask ''" in err
+    assert h.node.rejected.total() == 0 and len(h.node.window) == 2  # warned, still used
 
 
 def test_header_is_copied_from_depth(harness):
@@ -289,3 +320,73 @@ def test_header_is_copied_from_depth(harness):
     h.send((d, n, m))
     assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
     assert h.info.msgs[0].header.frame_id == "my_depth_frame" and stamp_ns(h.info.msgs[0]) == T0
+
+
+def test_every_depth_image_gets_one_camera_info_while_the_estimator_is_stuck(harness, monkeypatch):
+    gate = Gate(monkeypatch)
+    # A deep synchroniser queue must not turn into an estimator backlog (issue 9.7).
+    h = harness(parameter_overrides=[Parameter("queue_size", value=50)])
+    try:
+        assert h.frame(frame_messages(cam(0), T0))
+        gate.close()
+        h.send(frame_messages(cam(1), T0 + DT))
+        assert spin_until(h.ex, lambda: h.node._busy_since is not None, 10)  # the estimator holds frame 1
+        for k in range(2, 10):
+            h.send(frame_messages(cam(k), T0 + k * DT))
+            # Published while the estimator cannot finish anything: publishing does not wait for it.
+            assert spin_until(h.ex, lambda: len(h.info) == k + 1, 10)
+        assert h.node.processed == 1 and h.node.handoff_dropped == 7  # frames 2..8 replaced by newer ones
+    finally:
+        gate.open()
+    assert h.settle()
+    assert spin_until(h.ex, lambda: len(h.poses) == 3, 10)
+    assert [stamp_ns(m) for m in h.info.msgs] == [T0 + k * DT for k in range(10)]  # each exactly once
+    assert all(abs(m.k[0] / 600.0 - 1) < 1e-3 for m in h.info.msgs)
+    # The estimator went from frame 1 straight to the newest, frame 9: no backlog.
+    assert [stamp_ns(m) for m in h.poses.msgs] == [T0, T0 + DT, T0 + 9 * DT]
+    assert h.node.rejected["estimator_busy"] == 7
+
+
+def test_diagnostics_error_when_the_estimator_stalls_and_warn_when_behind(harness, monkeypatch, capfd):
+    gate = Gate(monkeypatch)
+    h = harness(parameter_overrides=[Parameter("diagnostics_period", value=0.1),
+                                     Parameter("max_estimate_age", value=0.3)])
+    rec = Recorder(h.tester, DiagnosticArray, "/diagnostics")
+    try:
+        assert h.frame(frame_messages(cam(0), T0))
+        gate.close()
+        for k in range(1, 11):
+            h.send(frame_messages(cam(k), T0 + k * DT))
+            assert spin_until(h.ex, lambda: h.node.received == 3 * (k + 1), 10)
+        # The first message built after all ten frames were in (one built earlier has fewer drops).
+        def after_all(m):
+            return {kv.key: kv.value for kv in m.status[0].values}.get("rejected_estimator_busy") == "8"
+        assert spin_until(h.ex, lambda: rec.msgs and after_all(rec.msgs[-1])
+                          and rec.msgs[-1].status[0].level == DiagnosticStatus.ERROR, 10)
+        st = rec.msgs[-1].status[0]
+        v = {kv.key: kv.value for kv in st.values}
+        assert "estimator stalled" in st.message and float(v["estimator_busy_s"]) >= 0.3  # 2 decimals
+        assert "the estimator is slower than the input" in capfd.readouterr().err  # the drops are logged
+    finally:
+        gate.open()
+    assert h.settle()
+    n = len(rec)
+    # Once it runs again: behind (skipped 8 frames, estimated 3 in the last 5 s), no longer stalled.
+    assert spin_until(h.ex, lambda: len(rec) > n and rec.msgs[-1].status[0].level != DiagnosticStatus.ERROR, 10)
+    assert rec.msgs[-1].status[0].level == DiagnosticStatus.WARN and "behind" in rec.msgs[-1].status[0].message
+
+
+def test_image_size_change_starts_a_new_window(harness, capfd):
+    h = harness()
+    assert h.frame(frame_messages(cam(0), T0))
+    assert h.frame(frame_messages(cam(1), T0 + DT))
+    small = clean_frame(2, 320, 240, 300.0)  # another camera mode: half the size, half the focal
+    assert h.frame(frame_messages(small, T0 + 2 * DT))
+    assert len(h.node.window) == 1 and abs(h.node.window.current.focal / 300.0 - 1) < 1e-3
+    assert "image size changed from 640x480 to 320x240" in capfd.readouterr().err
+    # Its depth image arrived while the estimate was for 640x480 (none then); it gets its own
+    # CameraInfo once the new window has an estimate.
+    assert spin_until(h.ex, lambda: len(h.info) == 3, 10)
+    last = h.info.msgs[-1]
+    assert stamp_ns(last) == T0 + 2 * DT and (last.width, last.height) == (320, 240)
+    assert abs(last.k[0] / 300.0 - 1) < 1e-3 and last.k[2] == 159.5

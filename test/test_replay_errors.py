@@ -61,7 +61,7 @@ def read_only_dir(path: Path):
     ("window_frames:=abc", "parameter window_frames from -p must be int, got 'abc'"),
     ("window_frames:=0", "parameter window_frames=0 from -p is outside [1, 1000]"),
     ("window_frames:=2.5", "parameter window_frames from -p must be int, got 2.5"),
-    ("focal_min:=30000.0", "focal_min (30000.0) must be below focal_max (20000.0)"),
+    ("focal_min:=30000.0", "focal_min=30000.0 is not allowed: it must be below focal_max=20000.0"),
     ("sync_mode:=fuzzy", "parameter sync_mode='fuzzy' from -p must be one of: exact, approximate"),
     ("publish_poses:=maybe", "parameter publish_poses from -p must be bool, got 'maybe'"),
     ("window_frames=3", "-p expects NAME:=VALUE, got 'window_frames=3'"),

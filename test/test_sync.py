@@ -114,22 +114,86 @@ def test_approximate_rejects_beyond_slop():
     assert sync.stats.dropped["unmatched"] == 1
 
 
-def test_late_message_and_time_jump_reset():
+def test_late_message_and_looped_bag_resets_without_losing_frames():
     sync = StampSynchronizer(2, queue_size=5, reset_after=1.0)
     run(sync, [(0, 5000 * MS), (1, 5000 * MS)])
     assert run(sync, [(0, 4900 * MS)]) == [] and sync.stats.dropped["late"] == 1
     run(sync, [(0, 5100 * MS)])
-    # A jump back by more than reset_after: a looped bag starts over.
-    sets = run(sync, [(0, 10 * MS), (1, 10 * MS)])
-    assert sync.stats.resets == 1 and len(sets) == 1
+    # A jump back by more than reset_after is held until three messages in a row confirm it
+    # (a looped bag): then the synchroniser starts over and the held frames are all used.
+    sets = run(sync, [(0, 10 * MS), (1, 10 * MS), (0, 43 * MS), (1, 43 * MS)])
+    assert sets == [] and sync.stats.resets == 0 and sync.held() == 4
+    sets = run(sync, [(0, 76 * MS)])
+    assert sync.stats.resets == 1
     assert sync.stats.dropped["time_jump_reset"] == 1  # the pending 5100 ms depth
+    # Input 1 follows input 0, which has already arrived there: no second confirmation needed.
+    sets = run(sync, [(1, 76 * MS)])
+    assert [s[0][1] for s in sets] == [10 * MS, 43 * MS, 76 * MS]
+    assert sync.stats.outliers.total() == 0 and sync.held() == 0
+
+
+def regular(n_frames, period_ms=33, start_ms=100_000, inputs=3):
+    return [(i, (start_ms + k * period_ms) * MS) for k in range(n_frames) for i in range(inputs)]
+
+
+@pytest.mark.parametrize("bad_ms", [0, 100_000 + 5 * 33 + 3600_000])  # stamped 0; an hour ahead
+def test_isolated_outlier_frame_is_dropped_and_counted_per_input(bad_ms):
+    sync = StampSynchronizer(3, queue_size=5)
+    events = regular(5) + [(i, bad_ms * MS) for i in range(3)] + regular(10)[15:]
+    sets = run(sync, events)
+    check_invariants(sets, 3)
+    assert len(sets) == 10 and sync.stats.resets == 0
+    assert dict(sync.stats.outliers) == {0: 1, 1: 1, 2: 1} and sync.stats.dropped["outlier_stamp"] == 3
+    assert all(bad_ms * MS not in (m[1] for m in s) for s in sets)
+
+
+def test_one_input_stamped_zero_never_resets_and_is_named():
+    sync = StampSynchronizer(3, queue_size=5)
+    run(sync, regular(3))
+    events = []
+    for k in range(3, 20):
+        events += [(0, (100_000 + 33 * k) * MS), (1, (100_000 + 33 * k) * MS), (2, 0)]
+    run(sync, events)
+    assert sync.stats.resets == 0
+    # Every mask after the first zero is held against the next (not increasing: never a real jump).
+    assert sync.stats.outliers[2] == 16 and sync.stats.outliers[0] == sync.stats.outliers[1] == 0
+    assert sync.outliers_dropped[-1][0] == 2
+
+
+def test_outlier_reported_by_the_add_that_drops_it():
+    sync = StampSynchronizer(2)
+    run(sync, regular(4, inputs=2))
+    assert sync.add(0, 0, "x") == [] and sync.outliers_dropped == []  # held
+    sync.add(0, (100_000 + 4 * 33) * MS, "y")
+    assert sync.outliers_dropped == [(0, [0], (100_000 + 3 * 33) * MS)]
+    assert [a[1] for a in sync.accepted] == [(100_000 + 4 * 33) * MS]
+
+
+def test_slow_camera_and_a_pause_are_not_outliers():
+    slow = StampSynchronizer(3)
+    sets = run(slow, regular(8, period_ms=2500))  # 0.4 Hz: every step beyond reset_after
+    assert len(sets) == 8 and slow.stats.dropped_total == 0 and slow.held() == 0
+    paused = StampSynchronizer(3, queue_size=5)
+    events = regular(6) + regular(6, start_ms=200_000)  # the camera stopped for 100 s
+    sets = run(paused, events)
+    check_invariants(sets, 3)
+    assert len(sets) == 12 and paused.stats.resets == 0 and paused.stats.dropped_total == 0
+
+
+def test_configure_keeps_queued_messages():
+    sync = StampSynchronizer(3, queue_size=5)
+    run(sync, [(0, k * MS) for k in range(1, 5)])
+    sync.configure(queue_size=2, slop=0.002)
+    assert sync.pending() == 2 and sync.stats.per_input[("queue_full", 0)] == 2 and sync.slop_ns == 2 * MS
+    assert len(run(sync, [(1, 4 * MS + MS), (2, 4 * MS)])) == 1
 
 
 def test_queue_bound_and_bad_arguments():
     sync = StampSynchronizer(3, queue_size=4)
     run(sync, [(0, k * MS) for k in range(10)])
     assert sync.pending() == 4 and sync.stats.dropped["queue_full"] == 6
-    for bad in [dict(n_inputs=0), dict(n_inputs=3, queue_size=0), dict(n_inputs=3, slop=-1.0)]:
+    for bad in [dict(n_inputs=0), dict(n_inputs=3, queue_size=0), dict(n_inputs=3, slop=-1.0),
+                dict(n_inputs=3, confirm=0)]:
         with pytest.raises(ValueError):
             StampSynchronizer(**bad)
 

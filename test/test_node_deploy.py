@@ -1,0 +1,260 @@
+"""fcop_node deployed like a ROS 2 camera node: the shipped params file under a namespace
+(in-process and as a subprocess), the driver's camera_info as input, the saved calibration
+(parsed back) and the SetCameraInfo call, and the two NOCS conventions."""
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+from rcl_interfaces.srv import GetParameters
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import CameraInfo
+from sensor_msgs.srv import SetCameraInfo
+from std_srvs.srv import Trigger
+
+from conftest import clean_frame, noisy_frame
+from fcop_ros.node import to_fcop_convention
+from ros_helpers import Recorder, frame_messages, harness, ros_context, rotation_errors, spin_until, stamp_ns  # noqa
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIG = os.path.join(ROOT, "config", "fcop.yaml")
+BIN = os.path.dirname(sys.executable)
+T0 = 1_700_000_000_000_000_000
+DT = 33_333_333
+
+
+def cam(k, focal=600.0):
+    return clean_frame(k, 640, 480, focal)
+
+
+def shipped_with(tmp_path, **changes):
+    """config/fcop.yaml as shipped (keyed /**), with some values changed."""
+    text = open(CONFIG).read()
+    for name, value in changes.items():
+        lines = [ln for ln in text.splitlines() if ln.strip().startswith(name + ":")]
+        assert len(lines) == 1, name
+        text = text.replace(lines[0], f"    {name}: {value}")
+    path = tmp_path / "params.yaml"
+    path.write_text(text)
+    return str(path)
+
+
+# ----- namespaces (issue 10.1)
+
+def test_shipped_params_file_applies_under_a_namespace_and_another_name(harness, tmp_path):
+    params = shipped_with(tmp_path, window_frames=7, sync_mode="approximate")
+    h = harness(node_args=["--ros-args", "-r", "__ns:=/camera", "-r", "__node:=focal", "--params-file", params],
+                inputs=("/camera/depth", "/camera/nocs", "/camera/mask"))
+    assert h.node.get_fully_qualified_name() == "/camera/focal"
+    assert h.node.p["window_frames"] == 7 and h.node.window.max_frames == 7 and h.node.sync.slop_ns == 10_000_000
+    # Outputs beside the inputs.
+    assert h.node.pub_info.topic_name == "/camera/camera_info"
+    assert h.node.sub_info_in.topic_name == "/camera/camera_info_in"
+    rec = Recorder(h.tester, CameraInfo, "/camera/camera_info")
+    assert h.frame(frame_messages(cam(0), T0))
+    assert spin_until(h.ex, lambda: len(rec) == 1, 10)
+
+
+def test_shipped_params_file_applies_to_the_installed_node_under_a_namespace(tmp_path):
+    exe = os.path.join(BIN, "fcop_node")
+    params = shipped_with(tmp_path, window_frames=45, camera_name="left")
+    err = open(tmp_path / "node.err", "w")
+    proc = subprocess.Popen([exe, "--ros-args", "-r", "__ns:=/cam", "-r", "__node:=fcop_ns", "--params-file", params],
+                            stdout=subprocess.DEVNULL, stderr=err)
+    try:
+        with ros_context() as (ctx, ex):
+            tester = Node("ns_tester", context=ctx)
+            ex.add_node(tester)
+            client = tester.create_client(GetParameters, "/cam/fcop_ns/get_parameters")
+            assert spin_until(ex, client.service_is_ready, 60), (tmp_path / "node.err").read_text()
+            fut = client.call_async(GetParameters.Request(names=["window_frames", "camera_name", "queue_size"]))
+            assert spin_until(ex, fut.done, 20)
+            got = fut.result().values
+            assert [got[0].integer_value, got[1].string_value, got[2].integer_value] == [45, "left", 5]
+            tester.destroy_node()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 0
+        assert "Traceback" not in (tmp_path / "node.err").read_text()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+# ----- camera_info_in (issue 10.3)
+
+def driver_info(width=640, height=480, d=(0.1, -0.05, 0.001, 0.002, 0.0), cx=330.25, cy=228.75):
+    msg = CameraInfo()
+    msg.header.frame_id = "camera_optical_frame"
+    msg.width, msg.height = width, height
+    msg.distortion_model = "plumb_bob"
+    msg.d = list(d)
+    msg.k = [500.0, 0.0, cx, 0.0, 500.0, cy, 0.0, 0.0, 1.0]  # the driver's focal is wrong: replaced
+    c, s = np.cos(0.01), np.sin(0.01)
+    msg.r = [c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0]
+    msg.p = [500.0, 0.0, cx, 0.0, 0.0, 500.0, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+    return msg
+
+
+def send_driver_info(h, msg):
+    from rclpy.qos import qos_profile_sensor_data
+    pub = h.tester.create_publisher(CameraInfo, "camera_info_in", qos_profile_sensor_data)
+    assert spin_until(h.ex, lambda: pub.get_subscription_count() == 1, 10)
+    pub.publish(msg)
+    assert spin_until(h.ex, lambda: h.node._cam_in is not None, 10)
+    return pub
+
+
+def test_camera_info_in_is_carried_through(harness, capfd):
+    h = harness()
+    drv = driver_info()
+    pub = send_driver_info(h, drv)
+    fr = cam(0)
+    assert h.frame(frame_messages(fr, T0))
+    assert h.frame(frame_messages(cam(1), T0 + DT))
+    assert spin_until(h.ex, lambda: len(h.info) == 2, 10)
+    for out in h.info.msgs:
+        f = out.k[0]
+        assert abs(f / 600.0 - 1) < 0.01  # the estimate, not the driver's 500
+        assert list(out.k) == [f, 0.0, 330.25, 0.0, f, 228.75, 0.0, 0.0, 1.0]
+        assert list(out.p) == [f, 0.0, 330.25, 0.0, 0.0, f, 228.75, 0.0, 0.0, 0.0, 1.0, 0.0]
+        assert out.distortion_model == "plumb_bob" and list(out.d) == list(drv.d)
+        assert np.allclose(out.r, drv.r) and (out.width, out.height) == (640, 480)
+    # The principal point parameters still win.
+    assert h.node.set_parameters([Parameter("principal_point_x", value=300.0)])[0].successful
+    assert h.frame(frame_messages(cam(2), T0 + 2 * DT))
+    assert spin_until(h.ex, lambda: len(h.info) == 3, 10)
+    assert h.info.msgs[-1].k[2] == 300.0 and h.info.msgs[-1].k[5] == 228.75
+    # Non-zero D is warned about once, however many camera_info messages come.
+    drv.header.stamp.sec = 7
+    pub.publish(drv)
+    assert spin_until(h.ex, lambda: h.node._cam_in.header.stamp.sec == 7, 10)
+    assert capfd.readouterr().err.count("camera_info_in has non-zero distortion") == 1
+
+
+def test_camera_info_in_of_another_size_rejects_frames(harness):
+    h = harness()
+    send_driver_info(h, driver_info(1280, 960))
+    h.send(frame_messages(cam(0), T0))
+    assert h.settle(1)
+    assert h.node.rejected["camera_info_size_mismatch"] == 1 and h.node.camera_info_published == 0
+    assert h.node.window.current.focal is None
+
+
+# ----- ~/save_calibration (issue 10.4)
+
+def call_save(h):
+    client = h.tester.create_client(Trigger, "/fcop_node/save_calibration")
+    assert client.wait_for_service(timeout_sec=5.0)
+    fut = client.call_async(Trigger.Request())
+    assert spin_until(h.ex, fut.done, 10)
+    return fut.result()
+
+
+def test_save_calibration_writes_what_camera_info_manager_loads(harness, tmp_path):
+    path = tmp_path / "cal" / "left.yaml"
+    received = []
+    h = harness(parameter_overrides=[Parameter("calibration_file", value=str(path)),
+                                     Parameter("camera_name", value="left"),
+                                     Parameter("set_camera_info_service", value="/driver/set_camera_info")])
+
+    def on_set(request, response):
+        received.append(request.camera_info)
+        response.success, response.status_message = True, "stored"
+        return response
+    h.tester.create_service(SetCameraInfo, "/driver/set_camera_info", on_set)
+    res = call_save(h)
+    assert not res.success and "no focal estimate" in res.message and not path.exists()
+    send_driver_info(h, driver_info(d=(0.0,) * 5))
+    assert h.frame(frame_messages(cam(0), T0))
+    assert spin_until(h.ex, lambda: h.node.set_info_client.service_is_ready(), 10)
+    res = call_save(h)
+    assert res.success and str(path) in res.message, res.message
+    assert spin_until(h.ex, lambda: len(received) == 1, 10)
+    focal = h.node.window.current.focal
+    cal = yaml.safe_load(path.read_text())
+    assert cal["image_width"] == 640 and cal["image_height"] == 480 and cal["camera_name"] == "left"
+    assert cal["camera_matrix"] == {"rows": 3, "cols": 3,
+                                    "data": pytest.approx([focal, 0, 330.25, 0, focal, 228.75, 0, 0, 1], rel=1e-12)}
+    assert cal["distortion_model"] == "plumb_bob"
+    assert cal["distortion_coefficients"] == {"rows": 1, "cols": 5, "data": [0.0] * 5}
+    assert cal["rectification_matrix"]["rows"] == 3 and cal["rectification_matrix"]["cols"] == 3
+    assert cal["rectification_matrix"]["data"] == pytest.approx(list(driver_info().r), rel=1e-12)
+    assert cal["projection_matrix"] == {"rows": 3, "cols": 4, "data": pytest.approx(
+        [focal, 0, 330.25, 0, 0, focal, 228.75, 0, 0, 0, 1, 0], rel=1e-12)}
+    assert set(cal) == {"image_width", "image_height", "camera_name", "camera_matrix", "distortion_model",
+                        "distortion_coefficients", "rectification_matrix", "projection_matrix"}
+    # The SetCameraInfo request carries the same calibration.
+    sent = received[0]
+    assert list(sent.k) == pytest.approx(cal["camera_matrix"]["data"]) and (sent.width, sent.height) == (640, 480)
+
+
+def test_save_calibration_refuses_an_uncertain_estimate(harness, tmp_path):
+    path = tmp_path / "c.yaml"
+    h = harness(parameter_overrides=[Parameter("calibration_file", value=str(path)),
+                                     Parameter("max_uncertainty", value=1e-6)])
+    assert h.frame(frame_messages(noisy_frame(0, "moderate"), T0))
+    std = h.node.window.current.std_rel
+    assert h.node.window.current.focal is not None and std > 1e-6
+    res = call_save(h)
+    assert not res.success and "above max_uncertainty" in res.message and not path.exists()
+
+
+def test_default_calibration_file_is_under_ros_camera_info(harness, tmp_path, monkeypatch):
+    monkeypatch.setenv("HOME", str(tmp_path))
+    h = harness(parameter_overrides=[Parameter("camera_name", value="front")])
+    assert h.node.calibration_path() == str(tmp_path / ".ros" / "camera_info" / "front.yaml")
+    assert h.frame(frame_messages(cam(0), T0))
+    assert call_save(h).success and (tmp_path / ".ros" / "camera_info" / "front.yaml").is_file()
+
+
+# ----- NOCS conventions (issue 10.5)
+
+def to_dataset_convention(frame):
+    """The frame's NOCS as the NOCS dataset writes it: z = 1 - z where there is a prediction."""
+    from dataclasses import replace
+    return replace(frame, nocs=to_fcop_convention(frame.nocs))  # the flip is its own inverse
+
+
+@pytest.mark.parametrize("convention, data, right", [
+    ("fcop", "fcop", True),
+    ("nocs_dataset", "nocs_dataset", True),
+    ("fcop", "nocs_dataset", False),   # what happened before the parameter existed
+])
+def test_nocs_convention_focal_and_pose(harness, convention, data, right):
+    h = harness(parameter_overrides=[Parameter("nocs_convention", value=convention),
+                                     Parameter("max_uncertainty", value=1.0)])
+    fr = cam(0)
+    sent = fr if data == "fcop" else to_dataset_convention(fr)
+    assert h.frame(frame_messages(sent, T0))
+    assert spin_until(h.ex, lambda: len(h.poses) == 1 and len(h.markers) == 1, 10)
+    focal_err = abs(h.node.window.current.focal / 600.0 - 1)
+    rot = np.median(rotation_errors(h.poses.msgs[0], h.markers.msgs[0], fr))
+    if right:
+        assert focal_err < 1e-3 and rot < 1.0, (focal_err, rot)
+    else:
+        assert focal_err > 0.05 or rot > 20.0, (focal_err, rot)
+
+
+def test_output_qos_is_what_the_readme_says(harness):
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
+    h = harness()
+    text = open(os.path.join(ROOT, "README.md")).read()
+    assert "outputs reliable, volatile, keep last 10" in text
+    assert "`~/latest_camera_info` | sensor_msgs/CameraInfo | out | reliable, transient local, depth 1" in text
+    for topic in ("/camera_info", "/object_poses", "/object_markers"):
+        (info,) = h.tester.get_publishers_info_by_topic(topic)  # as the graph (another node) sees it
+        assert (info.qos_profile.reliability, info.qos_profile.durability) == (
+            ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE), topic
+    for pub in (h.node.pub_info, h.node.pub_poses, h.node.pub_markers):
+        assert (pub.qos_profile.history, pub.qos_profile.depth) == (HistoryPolicy.KEEP_LAST, 10)
+    (info,) = h.tester.get_publishers_info_by_topic("/fcop_node/latest_camera_info")
+    assert (info.qos_profile.reliability, info.qos_profile.durability) == (
+        ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)
+    for topic in ("/depth", "/nocs", "/mask", "/camera_info_in"):
+        (info,) = h.tester.get_subscriptions_info_by_topic(topic)
+        assert info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT, topic

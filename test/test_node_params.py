@@ -1,0 +1,377 @@
+"""fcop_node parameters: bad values at start-up (the installed executable, as a user runs it),
+and every parameter that can be set at run time changes what the node does (or is read-only)."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.parameter import Parameter
+from std_srvs.srv import Trigger
+
+from conftest import clean_frame, noisy_frame
+from fcop_ros.node import PARAMETERS, READ_ONLY
+from ros_helpers import (Gate, Recorder, frame_messages, harness, header, rotation_errors,  # noqa: F401
+                         spin_until, stamp_ns)
+
+BIN = os.path.dirname(sys.executable)
+T0 = 1_700_000_000_000_000_000
+DT = 33_333_333
+
+
+def cam(k, focal=600.0):
+    return clean_frame(k, 640, 480, focal)
+
+
+def values(status):
+    return {kv.key: kv.value for kv in status.values}
+
+
+# ----- start-up: one line, the parameter, its value and what is allowed; exit 2; no traceback
+
+@pytest.mark.parametrize("arg, expected", [
+    ("focal_min:=30000.0", ["focal_min=30000.0", "below focal_max=20000.0"]),
+    ("window_frames:=0", ["window_frames=0", "[1, 1000]"]),
+    ("window_frames:=abc", ["window_frames='abc'", "an integer in [1, 1000]"]),
+    ("sync_mode:=fuzzy", ["sync_mode='fuzzy'", "one of exact, approximate"]),
+    ("principal_point_x:=-5.0", ["principal_point_x=-5.0", "[-1.0, 1000000.0]"]),
+])
+def test_bad_parameter_at_start_up_is_one_line_and_exit_2(arg, expected):
+    exe = os.path.join(BIN, "fcop_node")
+    res = subprocess.run([exe, "--ros-args", "-p", arg], capture_output=True, text=True, timeout=60)
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert res.returncode == 2, res.stderr
+    assert "Traceback" not in res.stderr and len(lines) == 1, res.stderr
+    assert all(e in lines[0] for e in expected), lines[0]
+
+
+@pytest.mark.parametrize("overrides, expected", [
+    ({"focal_min": 30000.0}, "parameter focal_min=30000.0 is not allowed: it must be below focal_max=20000.0"),
+    ({"noise_bound": 0.9}, "parameter noise_bound=0.9 is not allowed: a fraction in (0, 0.5]"),
+    ({"camera_name": "my camera"}, "parameter camera_name='my camera' is not allowed"),
+])
+def test_bad_parameter_in_process_raises_parameter_error(overrides, expected):
+    from fcop_ros.node import FcopNode, ParameterError
+    from ros_helpers import ros_context
+    with ros_context() as (ctx, ex):
+        with pytest.raises(ParameterError) as err:
+            FcopNode(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()])
+        assert str(err.value).startswith(expected)
+
+
+def test_integer_for_a_float_parameter_is_taken(harness):
+    # `-p focal_min:=300` is what people type; rclpy alone refuses an INTEGER for a DOUBLE.
+    h = harness(node_args=["--ros-args", "-p", "focal_min:=300"])
+    assert h.node.p["focal_min"] == 300.0
+
+
+# ----- run time: each settable parameter changes behaviour
+
+def frames_then(h, n=3, first=0, frame=cam):
+    for k in range(first, first + n):
+        assert h.frame(frame_messages(frame(k), T0 + k * DT))
+
+
+def set_ok(h, **values_):
+    res = h.node.set_parameters([Parameter(k, value=v) for k, v in values_.items()])
+    assert all(r.successful for r in res), [r.reason for r in res]
+
+
+def check_window_frames(h):
+    frames_then(h, 3)
+    set_ok(h, window_frames=2)
+    assert len(h.node.window) == 2 and h.node.window.current.focal is not None  # evidence kept
+
+
+def check_window_seconds(h):
+    frames_then(h, 3)  # 33 ms apart
+    set_ok(h, window_seconds=0.05)
+    assert len(h.node.window) == 2 and h.node.window.current.focal is not None
+
+
+def check_min_frames(h):
+    frames_then(h, 3)
+    set_ok(h, min_frames=5)
+    assert h.node.window.current.focal is None and len(h.node.window) == 3
+    set_ok(h, min_frames=2)  # back, without a new frame: the evidence was kept
+    assert h.node.window.current.focal is not None
+
+
+def check_min_support(h):
+    frames_then(h, 2)
+    set_ok(h, min_support=10_000_000)
+    assert h.node.window.current.focal is None and len(h.node.window) == 2
+    set_ok(h, min_support=30)
+    assert h.node.window.current.focal is not None
+
+
+def _inliers(h, k, frame):
+    assert h.frame(frame_messages(frame(k), T0 + k * DT))
+    return h.node.last_estimate.inlier_count
+
+
+def check_triplets_per_object(h):
+    before = _inliers(h, 0, cam)
+    set_ok(h, triplets_per_object=10)
+    after = _inliers(h, 1, cam)
+    assert before > 50 >= after  # at most 10 votes per object, 5 objects
+
+
+def moderate(k):
+    return noisy_frame(k, "moderate")
+
+
+def check_noise_bound(h):
+    before = _inliers(h, 0, moderate)
+    set_ok(h, noise_bound=0.0005)
+    assert _inliers(h, 0 + 1, lambda k: moderate(0)) < 0.5 * before
+
+
+def check_noise_bound_mode(h):
+    before = _inliers(h, 0, moderate)
+    set_ok(h, noise_bound_mode="absolute")  # 0.05 px instead of 5% of f
+    assert _inliers(h, 1, lambda k: moderate(0)) < 0.5 * before
+
+
+def check_focal_min(h):
+    frames_then(h, 1)
+    assert abs(h.node.last_estimate.focal / 600 - 1) < 0.01
+    set_ok(h, focal_min=700.0)
+    frames_then(h, 1, first=1)
+    f = h.node.last_estimate.focal
+    assert f is None or f >= 700.0
+
+
+def check_focal_max(h):
+    frames_then(h, 1)
+    set_ok(h, focal_max=500.0)
+    frames_then(h, 1, first=1)
+    f = h.node.last_estimate.focal
+    assert f is None or f <= 500.0
+
+
+def check_min_object_pixels(h):
+    frames_then(h, 1)
+    set_ok(h, min_object_pixels=10_000_000)
+    frames_then(h, 1, first=1)
+    assert h.node.last_estimate.focal is None and h.node.rejected["no_evidence"] == 1
+
+
+def check_depth_scale(h):
+    fr = cam(0)
+
+    def z_of_first_pose(k):
+        h.send(frame_messages(fr, T0 + k * DT, depth_encoding="16UC1"))
+        assert spin_until(h.ex, lambda: len(h.poses) == k + 1, 20)
+        return h.poses.msgs[-1].poses[0].position.z
+    z1 = z_of_first_pose(0)
+    set_ok(h, depth_scale=0.002)
+    z2 = z_of_first_pose(1)
+    assert abs(z2 / z1 - 2) < 0.01
+
+
+def check_principal_point_x(h):
+    frames_then(h, 1)
+    set_ok(h, principal_point_x=300.0)
+    frames_then(h, 1, first=1)
+    assert spin_until(h.ex, lambda: len(h.info) == 2, 10) and h.info.msgs[-1].k[2] == 300.0
+
+
+def check_principal_point_y(h):
+    frames_then(h, 1)
+    set_ok(h, principal_point_y=200.0)
+    frames_then(h, 1, first=1)
+    assert spin_until(h.ex, lambda: len(h.info) == 2, 10) and h.info.msgs[-1].k[5] == 200.0
+
+
+def _skewed(h, k, skew_ns):
+    d, n, m = frame_messages(cam(0), T0 + k * DT)
+    n.header = header(T0 + k * DT + skew_ns)
+    m.header = header(T0 + k * DT + skew_ns)
+    h.send((d, n, m))
+    assert spin_until(h.ex, lambda: h.node.received == 3 * (k + 1), 10)
+
+
+def check_sync_mode(h):
+    _skewed(h, 0, 5_000_000)
+    assert h.node.sync.stats.matched == 0
+    set_ok(h, sync_mode="approximate")  # sync_slop 0.01
+    _skewed(h, 1, 5_000_000)
+    assert h.node.sync.stats.matched == 1
+
+
+def check_sync_slop(h):
+    set_ok(h, sync_mode="approximate", sync_slop=0.001)
+    _skewed(h, 0, 5_000_000)
+    assert h.node.sync.stats.matched == 0
+    set_ok(h, sync_slop=0.01)
+    _skewed(h, 1, 5_000_000)
+    assert h.node.sync.stats.matched == 1
+
+
+def check_queue_size(h):
+    msgs = [frame_messages(cam(0), T0 + k * DT) for k in range(8)]
+    for k, trio in enumerate(msgs):
+        h.send(trio, which=(0,))
+        assert spin_until(h.ex, lambda: h.node.received == k + 1, 10)
+    assert h.node.sync.pending() == 5
+    set_ok(h, queue_size=2)
+    assert h.node.sync.pending() == 2
+
+
+def check_publish_poses(h):
+    frames_then(h, 1)
+    assert spin_until(h.ex, lambda: len(h.poses) == 1 and len(h.markers) == 1, 10)
+    set_ok(h, publish_poses=False)
+    frames_then(h, 1, first=1)
+    assert spin_until(h.ex, lambda: len(h.markers) == 2, 10)
+    assert h.node.published == 2 and len(h.poses) == 1
+
+
+def check_publish_markers(h):
+    frames_then(h, 1)
+    assert spin_until(h.ex, lambda: len(h.poses) == 1 and len(h.markers) == 1, 10)
+    set_ok(h, publish_markers=False)
+    frames_then(h, 1, first=1)
+    assert spin_until(h.ex, lambda: len(h.poses) == 2, 10)
+    assert h.node.published == 2 and len(h.markers) == 1
+
+
+def check_max_uncertainty(h):
+    frames_then(h, 1, frame=moderate)
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 10)
+    std = h.node.window.current.std_rel
+    set_ok(h, max_uncertainty=max(std / 10, 1e-6))  # held back now
+    frames_then(h, 1, first=1, frame=lambda k: moderate(0))
+    assert h.node.camera_info_published == 1
+    assert h.node.diagnostic_status().level == DiagnosticStatus.WARN
+    set_ok(h, max_uncertainty=0.05)  # published again, for the next depth image
+    frames_then(h, 1, first=2, frame=lambda k: moderate(0))
+    assert spin_until(h.ex, lambda: len(h.info) == 2, 10)
+    assert stamp_ns(h.info.msgs[-1]) == T0 + 2 * DT
+
+
+def check_diagnostics_period(h):
+    rec = Recorder(h.tester, DiagnosticArray, "/diagnostics")
+    assert spin_until(h.ex, lambda: rec.sub.get_publisher_count() >= 1, 10)
+    set_ok(h, diagnostics_period=0.1)  # from 60 s (harness start-up value)
+    assert spin_until(h.ex, lambda: len(rec) >= 3, 10)
+    assert h.node._diag_timer.timer_period_ns == 100_000_000
+
+
+def check_max_estimate_age(h, monkeypatch):
+    gate = Gate(monkeypatch)
+    clock = [1000.0]
+    h.node._now = lambda: clock[0]
+    frames_then(h, 1)
+    gate.close()
+    try:
+        h.send(frame_messages(cam(1), T0 + DT))
+        assert spin_until(h.ex, lambda: h.node._busy_since is not None, 10)
+        clock[0] += 1.0  # busy for one second (default max_estimate_age 2 s)
+        assert h.node.diagnostic_status().level == DiagnosticStatus.OK
+        set_ok(h, max_estimate_age=0.5)
+        st = h.node.diagnostic_status()
+        assert st.level == DiagnosticStatus.ERROR and "stalled" in st.message
+    finally:
+        gate.open()
+
+
+def check_nocs_convention(h):
+    set_ok(h, max_uncertainty=1.0)  # the wrong reading has a large std_rel: publish it anyway
+    fr = cam(0)
+    h.send(frame_messages(fr, T0))
+    assert spin_until(h.ex, lambda: len(h.poses) == 1 and len(h.markers) == 1, 20)
+    h.node._on_reset(Trigger.Request(), Trigger.Response())  # a new window: the two readings disagree
+    set_ok(h, nocs_convention="nocs_dataset")  # the same (fcop-convention) input read the other way
+    h.send(frame_messages(fr, T0 + DT))
+    assert spin_until(h.ex, lambda: len(h.poses) == 2 and len(h.markers) == 2, 20)
+    assert np.median(rotation_errors(h.poses.msgs[0], h.markers.msgs[0], fr)) < 1.0
+    assert np.median(rotation_errors(h.poses.msgs[1], h.markers.msgs[1], fr)) > 20.0
+
+
+def _save(h):
+    client = h.tester.create_client(Trigger, "/fcop_node/save_calibration")
+    assert client.wait_for_service(timeout_sec=5.0)
+    fut = client.call_async(Trigger.Request())
+    assert spin_until(h.ex, fut.done, 10)
+    return fut.result()
+
+
+def check_camera_name(h, tmp_path):
+    set_ok(h, calibration_file=str(tmp_path / "c.yaml"))
+    frames_then(h, 1)
+    set_ok(h, camera_name="left_cam")
+    assert _save(h).success
+    assert yaml.safe_load((tmp_path / "c.yaml").read_text())["camera_name"] == "left_cam"
+
+
+def check_calibration_file(h, tmp_path):
+    frames_then(h, 1)
+    set_ok(h, calibration_file=str(tmp_path / "a.yaml"))
+    assert _save(h).success and (tmp_path / "a.yaml").is_file()
+    set_ok(h, calibration_file=str(tmp_path / "sub" / "b.yaml"))
+    assert _save(h).success and (tmp_path / "sub" / "b.yaml").is_file()
+
+
+BEHAVIOUR = {name: globals()["check_" + name] for name in PARAMETERS if "check_" + name in globals()}
+
+
+def test_every_parameter_is_tested_at_run_time_or_read_only():
+    assert set(BEHAVIOUR) | READ_ONLY == set(PARAMETERS)
+    assert not set(BEHAVIOUR) & READ_ONLY
+
+
+@pytest.mark.parametrize("name", sorted(BEHAVIOUR))
+def test_parameter_set_at_run_time_changes_behaviour(harness, monkeypatch, tmp_path, name):
+    h = harness(parameter_overrides=[Parameter("diagnostics_period", value=60.0),
+                                     Parameter("calibration_file", value=str(tmp_path / "cal.yaml"))])
+    fn = BEHAVIOUR[name]
+    kwargs = {k: v for k, v in (("monkeypatch", monkeypatch), ("tmp_path", tmp_path))
+              if k in fn.__code__.co_varnames[:fn.__code__.co_argcount]}
+    fn(h, **kwargs)
+
+
+@pytest.mark.parametrize("name", sorted(READ_ONLY))
+def test_read_only_parameters_are_refused_at_run_time(harness, name):
+    h = harness()
+    d = h.node.describe_parameter(name)
+    assert d.read_only
+    value = {"seed": 5, "set_camera_info_service": "/x/set_camera_info"}[name]
+    res = h.node.set_parameters([Parameter(name, value=value)])[0]
+    assert not res.successful and h.node.p[name] == PARAMETERS[name][0]
+    res = h.node._on_set_parameters([Parameter(name, value=value)])  # and the node's own check says why
+    assert not res.successful and "read-only" in res.reason
+
+
+# ----- principal point, rates
+
+def test_principal_point_outside_the_image_is_refused(harness):
+    h = harness(parameter_overrides=[Parameter("principal_point_x", value=700.0)])
+    h.send(frame_messages(cam(0), T0))
+    assert h.settle(1)
+    assert h.node.rejected["principal_point_outside"] == 1 and h.node.camera_info_published == 0
+    set_ok(h, principal_point_x=320.0)
+    assert h.frame(frame_messages(cam(0), T0 + DT))
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 10) and h.info.msgs[0].k[2] == 320.0
+    # Now the image size is known: a value outside it is refused at once, with the range.
+    res = h.node.set_parameters([Parameter("principal_point_y", value=480.0)])[0]
+    assert not res.successful and "principal_point_y=480.0" in res.reason and "[0, 479]" in res.reason
+    assert h.node.p["principal_point_y"] == -1.0
+
+
+def test_frame_rate_reads_above_40_hz(harness):
+    h = harness()
+    clock = [500.0]
+    h.node._now = lambda: clock[0]
+    h.node.publish_diagnostics()  # the first sample
+    tiny = clean_frame(0, 32, 24)
+    for k in range(500):  # 500 frames in 5 s: 100 Hz
+        msgs = frame_messages(tiny, T0 + k * 10_000_000)
+        for i in range(3):
+            h.node._on_image(i, msgs[i])
+    clock[0] += 5.0
+    v = values(h.node.publish_diagnostics().status[0])
+    assert float(v["frame_rate_hz"]) == pytest.approx(100.0)
