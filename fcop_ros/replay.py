@@ -243,14 +243,11 @@ def check_parameters(values: dict, where: dict) -> dict:
                 and value not in limits:
             raise ReplayError(f"parameter {name}={value!r} from {src} must be one of: {', '.join(limits)}")
         out[name] = value
-    try:
-        from .node import FcopNode
-        check = getattr(FcopNode, "_check", None)
-        full = {k: (v[0] if isinstance(v, tuple) else v) for k, v in PARAMETERS.items()}
-        full.update({k: v for k, v in out.items() if k in PARAMETERS})
-        problem = check(full) if check is not None else ""
-    except Exception:  # a changed node API: the node's own check still runs when it starts
-        problem = ""
+    from .node import check_combination
+
+    full = {k: (v[0] if isinstance(v, tuple) else v) for k, v in PARAMETERS.items()}
+    full.update({k: v for k, v in out.items() if k in PARAMETERS})
+    problem = check_combination(full)
     if problem:
         raise ReplayError(f"invalid parameters: {problem}")
     return out
