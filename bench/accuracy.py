@@ -29,8 +29,8 @@ VARIANTS = {
     "+ edge erosion 1 px, outlier rejection": STEP2,
     "+ local denoising (5x5)": STEP3,
     "+ depth-gradient edge rejection": STEP4,
-    "+ LS refinement over inlier pixels (no bias correction)": {"bias_correction": False},
-    "shipped (+ depth-noise bias correction)": {},
+    "+ per-object ML fit, random effects (no depth tilt)": {"depth_tilt": False},
+    "shipped (+ each object's depth-error gradient as a nuisance)": {},
     "paper RANSAC variant (5 mm threshold)": {**LITERAL, "method": "ransac"},
 }
 

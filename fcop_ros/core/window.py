@@ -178,18 +178,17 @@ class FocalWindow:
         w = 1.0 / v
         mean = float(np.sum(w * y) / w.sum())
         n = y.size
-        vbar = float(np.mean(v))
-        var = vbar
+        var = 1.0 / w.sum()  # independent frames that are as uncertain as they say
         if n >= 3:
             r = y - mean
-            s2 = float(np.sum(r ** 2) / (n - 1))
-            # Frames that disagree more than they say: their spread is the frame variance. Frames
-            # that agree clearly more closely (beyond one standard error of a variance) share the
-            # rest, which no averaging removes.
-            frame_var = max(vbar, s2)
-            persistent = max(vbar - s2 - vbar * np.sqrt(2.0 / (n - 1)), 0.0)
+            # Dispersion: 1 when the frames disagree as much as their std_rel say. Above it, their
+            # spread is the truth (variances scaled up); clearly below it (beyond one standard
+            # error), the frames share error that no averaging removes (the persistent part).
+            phi = float(np.sum(w * r * r) / (n - 1))
+            v_frame = n * var  # the harmonic mean of the frames' variances
+            persistent = max(1.0 - phi - np.sqrt(2.0 / (n - 1)), 0.0) * v_frame
             # Errors that drift slowly from frame to frame average out over fewer frames.
             rho = float(np.clip(np.sum(r[1:] * r[:-1]) / max(np.sum(r * r), 1e-300), 0.0, 0.95))
             n_eff = max(n * (1.0 - rho) / (1.0 + rho), 1.0)
-            var = persistent + (frame_var - persistent) / n_eff
+            var = persistent + (max(phi, 1.0) * v_frame - persistent) / n_eff
         return WindowEstimate(float(np.exp(mean)), float(np.sqrt(var)), support, n_all, n)
