@@ -57,7 +57,7 @@ def test_full_presets_unbiased_and_std_rel_covers(preset, frames, cover_min):
 def test_window_averages_on_moving_camera():
     """Orbiting 320x240 sequences of the predicted preset (window of 30, frames 5..29 scored):
     measured single-frame median 6.5%, window 4.8% (ratio 0.74; the issue asks 0.6: the depth
-    fields drift slowly, so neighbouring frames err alike), window coverage 66%, no restart."""
+    fields drift slowly, so neighbouring frames err alike), window coverage 93%, no restart."""
     single, win, cover, restarts = [], [], [], 0
     for q in range(4):
         seq = world_frames("predicted", FIRST_SEED + 500 + q, 30, size=(320, 240))
@@ -72,7 +72,7 @@ def test_window_averages_on_moving_camera():
                 cover.append(win[-1] <= 2 * r.std_rel)
     assert restarts == 0
     assert np.median(win) <= 0.8 * np.median(single)
-    assert np.mean(cover) >= 0.6
+    assert 0.85 <= np.mean(cover) <= 0.98
 
 
 def _garbage(fr, kind, rng):

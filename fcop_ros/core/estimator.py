@@ -138,7 +138,7 @@ def _poses(instances, focal: float, rng: np.random.Generator | None = None) -> l
     depth residuals), skipping instances whose NOCS fit only as a reflection."""
     if not instances:
         return []
-    fits = fit_objects(instances, focal, fix_focal=True, proper=True, rng=rng)
+    fits = fit_objects(instances, focal, fix_focal=True, proper=True, iterations=6, rng=rng)
     return [ObjectPose(inst.instance_id, fits.rotation[k], fits.translation[k], float(fits.scale[k]),
                        float(fits.inlier_ratio[k]), float(fits.sigma_depth[k]), int(len(inst.d)))
             for k, inst in enumerate(instances)

@@ -182,21 +182,26 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
         if it == iterations - 1:
             break
         # d(prediction)/dX rows for u, v, d; dX/d(log s, w, t) = [q, -[q]x, I].
-        A = np.zeros((o, m, 3, 3))
-        A[..., 0, 0] = f[:, None] / z
-        A[..., 0, 2] = -uh / z
-        A[..., 1, 1] = f[:, None] / z
-        A[..., 1, 2] = -vh / z
-        A[..., 2, 2] = gain
-        B = np.concatenate([q[..., None], -_skew_batch(q), np.broadcast_to(np.eye(3), (o, m, 3, 3))], -1)
-        J = A @ B  # (O,M,3,7)
-        if depth_tilt:
-            Jt = np.zeros((o, m, 3, 2))
-            Jt[..., 2, :] = z[..., None] * U
-            J = np.concatenate([J, Jt], -1)
+        # Jacobian of the predictions (u, v, d) in the parameters [log f], log s, w (3), t (3),
+        # [tilt (2)], written out per column (small batched matrix products are slow in numpy).
+        # dX/d(log s) = q, dX/dw = -[q]x, dX/dt = I.
+        qx, qy, qz = q[..., 0], q[..., 1], q[..., 2]
+        zero, one = np.zeros_like(qx), np.ones_like(qx)
+        dxx = (qx, zero, qz, -qy, one, zero, zero)
+        dxy = (qy, -qz, zero, qx, zero, one, zero)
+        dxz = (qz, qy, -qx, zero, zero, zero, one)
+        a = f[:, None] / z
+        J = np.empty((o, m, 3, npar))
+        k0 = 0 if fix_focal else 1
         if not fix_focal:
-            Jf = np.stack([uh, vh, np.zeros_like(uh)], -1)[..., None]
-            J = np.concatenate([Jf, J], -1)
+            J[..., 0, 0], J[..., 1, 0], J[..., 2, 0] = uh, vh, 0.0
+        for k in range(7):
+            J[..., 0, k0 + k] = a * dxx[k] - uh / z * dxz[k]
+            J[..., 1, k0 + k] = a * dxy[k] - vh / z * dxz[k]
+            J[..., 2, k0 + k] = gain * dxz[k]
+        if depth_tilt:
+            J[..., :2, k0 + 7:] = 0.0
+            J[..., 2, k0 + 7:] = z[..., None] * U
         wr = w_rob[..., None] / np.stack([sig_px, sig_px, sig_d], -1)[:, None, :] ** 2  # (O,M,3)
         Jr = J.reshape(o, 3 * m, npar)
         Jw = Jr * wr.reshape(o, 3 * m, 1)

@@ -145,7 +145,7 @@ class FocalWindow:
         # Slowly drifting errors make neighbouring frames alike: each segment holds fewer
         # independent frames (lag-one autocorrelation of the older half, before a recent step).
         r = y[: n // 2] - np.median(y[: n // 2])
-        rho = float(np.clip(np.sum(r[1:] * r[:-1]) / max(np.sum(r * r), 1e-300), 0.0, 0.95)) if r.size > 2 else 0.0
+        rho = _lag_one(r) if r.size > 3 else 0.0
         t *= (1.0 + rho) / (1.0 - rho)
         z = np.abs(diff) / np.sqrt(np.pi / 2 * (t / cut + t / (n - cut)))
         hit = (z > self.change_sigma) & (np.abs(diff) > np.log1p(self.change_threshold))
@@ -186,9 +186,19 @@ class FocalWindow:
             # error), the frames share error that no averaging removes (the persistent part).
             phi = float(np.sum(w * r * r) / (n - 1))
             v_frame = n * var  # the harmonic mean of the frames' variances
-            persistent = max(1.0 - phi - np.sqrt(2.0 / (n - 1)), 0.0) * v_frame
+            # The shared part, judged against a typical frame (the median: one very unsure frame
+            # must not inflate it, nor the most confident frames shrink it).
+            persistent = max(1.0 - phi - np.sqrt(2.0 / (n - 1)), 0.0) * float(np.median(v))
             # Errors that drift slowly from frame to frame average out over fewer frames.
-            rho = float(np.clip(np.sum(r[1:] * r[:-1]) / max(np.sum(r * r), 1e-300), 0.0, 0.95))
+            rho = _lag_one(r)
             n_eff = max(n * (1.0 - rho) / (1.0 + rho), 1.0)
-            var = persistent + (max(phi, 1.0) * v_frame - persistent) / n_eff
+            var = persistent + max(max(phi, 1.0) * v_frame - persistent, 0.0) / n_eff
         return WindowEstimate(float(np.exp(mean)), float(np.sqrt(var)), support, n_all, n)
+
+
+def _lag_one(r: np.ndarray) -> float:
+    """Lag-one autocorrelation of residuals r, corrected for its small-sample bias
+    (E[rho_hat] ~ rho - (1 + 3 rho) / n, Kendall), clipped to [0, 0.95]."""
+    n = r.size
+    rho = float(np.sum(r[1:] * r[:-1]) / max(np.sum(r * r), 1e-300))
+    return float(np.clip((n * rho + 1.0) / max(n - 3.0, 1.0), 0.0, 0.95))
