@@ -31,11 +31,11 @@ def signed_errors(preset, n):
 
 
 # Signed median focal error (%) of each zero-mean mechanism alone at its full bound, 24 frames:
-# measured field -0.00, relief -0.42, offset -0.07, depth_pixel -0.00, nocs_pixel +0.54,
-# nocs_field -0.15, shape -0.19. Per-pixel NOCS noise leaves a small positive bias (errors in
+# measured field -0.00, relief -0.43, offset -0.07, depth_pixel -0.00, nocs_pixel +0.56,
+# nocs_field -0.21, shape -0.17. Per-pixel NOCS noise leaves a small positive bias (errors in
 # the regressor; +0.43% on the tuning seeds): just over the issue's 0.5% here.
 @pytest.mark.parametrize("family", [pytest.param(f, marks=pytest.mark.xfail(
-    reason="measured +0.54%: per-pixel NOCS noise still biases f slightly", strict=False))
+    reason="measured +0.56%: per-pixel NOCS noise still biases f slightly", strict=False))
     if f == "nocs_pixel" else f for f in ZERO_MEAN_FAMILIES])
 def test_no_bias_from_a_zero_mean_mechanism(family):
     err, _ = signed_errors(f"only_{family}", 24)
@@ -43,10 +43,9 @@ def test_no_bias_from_a_zero_mean_mechanism(family):
     assert abs(np.median(err)) <= 0.005
 
 
-# Full presets: sensor (40 frames) median |e| 0.007%, signed -0.00%, coverage 97.5%;
-# predicted (80 frames) signed +0.61%, coverage 84%: a point short of the issue's 85% on these
-# seeds (92% on the tuning seeds): std_rel is still a little optimistic on predicted depth.
-@pytest.mark.parametrize("preset,frames,cover_min", [("sensor", 40, 0.85), ("predicted", 80, 0.80)])
+# Full presets: sensor (40 frames) median |e| 0.013%, signed -0.00%, coverage 97.5%;
+# predicted (80 frames) median |e| 2.8%, signed +0.90%, coverage 86%.
+@pytest.mark.parametrize("preset,frames,cover_min", [("sensor", 40, 0.85), ("predicted", 80, 0.85)])
 def test_full_presets_unbiased_and_std_rel_covers(preset, frames, cover_min):
     err, cover = signed_errors(preset, frames)
     assert err.size == frames
@@ -56,8 +55,8 @@ def test_full_presets_unbiased_and_std_rel_covers(preset, frames, cover_min):
 
 def test_window_averages_on_moving_camera():
     """Orbiting 320x240 sequences of the predicted preset (window of 30, frames 5..29 scored):
-    measured single-frame median 6.5%, window 4.8% (ratio 0.74; the issue asks 0.6: the depth
-    fields drift slowly, so neighbouring frames err alike), window coverage 93%, no restart."""
+    measured single-frame median 7.2%, window 4.5% (ratio 0.63; the issue asks 0.6: the depth
+    fields drift slowly, so neighbouring frames err alike), window coverage 89%, no restart."""
     single, win, cover, restarts = [], [], [], 0
     for q in range(4):
         seq = world_frames("predicted", FIRST_SEED + 500 + q, 30, size=(320, 240))
@@ -71,7 +70,7 @@ def test_window_averages_on_moving_camera():
                 win.append(abs(np.log(r.focal / fr.focal)))
                 cover.append(win[-1] <= 2 * r.std_rel)
     assert restarts == 0
-    assert np.median(win) <= 0.8 * np.median(single)
+    assert np.median(win) <= 0.7 * np.median(single)
     assert 0.85 <= np.mean(cover) <= 0.98
 
 

@@ -256,6 +256,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                     ok = ok2
                     md, cnt = _local_mean(dz, ok, rad)
                     mp, _ = _local_mean(pz, ok, rad)
+            means_of = ok  # the pixels md, mp and cnt are means over
             if edge_sigma > 0:
                 # Depth bleeding across object boundaries makes steep ramps: drop pixels whose
                 # (smoothed) depth gradient is far above the instance's typical gradient.
@@ -273,8 +274,9 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                 # object (a focal bias of several percent on small objects).
                 uu = (np.arange(c0, c1, st)[: dz.shape[1]] - cx)[None, :]
                 vv = (np.arange(r0, r1, st)[: dz.shape[0]] - cy)[:, None]
-                md, cnt = _local_mean(dz, ok, rad)
-                mp, _ = _local_mean(pz, ok, rad)
+                if ok is not means_of:
+                    md, cnt = _local_mean(dz, ok, rad)
+                    mp, _ = _local_mean(pz, ok, rad)
                 mu, _ = _local_mean(dz * uu, ok, rad)
                 mv, _ = _local_mean(dz * vv, ok, rad)
                 with np.errstate(divide="ignore", invalid="ignore"):

@@ -43,7 +43,8 @@ DEFAULTS = dict(
     shape_error=0.1,            # per-object systematic error: shape_error * sqrt(unexplained share of its shape)
     object_tau=0.005,           # prior between-object spread of log f beyond the terms above
     object_tau_weight=2.0,      # that prior's weight, in objects
-    fit_pixels=600,             # pixels per object in the maximum-likelihood fit
+    fit_pixels=300,             # pixels per object in the maximum-likelihood fit
+    fit_iterations=10,          # its Gauss-Newton iterations
     depth_tilt=True,            # fit each object's local depth-error gradient as a nuisance
     pose_max_std=0.25,          # no pose for an object whose own focal std_rel is above this
     poses=True,                 # False: leave poses to FocalEstimate.poses_at (e.g. at a window's focal)
@@ -252,6 +253,7 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     support = list(instances)
     seed = int(rng.integers(2 ** 32))
     fits = fit_objects(support, f0, max_pixels=opt["fit_pixels"], depth_tilt=opt["depth_tilt"],
+                       iterations=opt["fit_iterations"],
                        rng=np.random.default_rng(seed))
     spread = np.array([np.sqrt(np.mean(np.sum((i.p - i.p.mean(0)) ** 2, axis=1))) for i in support])
     good = (fits.ok & (fits.quality >= opt["min_fit_quality"]) & np.isfinite(fits.var_log_focal)
