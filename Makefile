@@ -27,14 +27,15 @@ test-all:
 	$(MAKE) test ROS=kilted
 	$(MAKE) test ROS=jazzy
 
-# The figures of docs/BENCHMARKS.md (several minutes; P4Pf needs the [bench] extra: pycolmap).
+# The figures of docs/BENCHMARKS.md (about an hour; P4Pf needs the [bench] extra: pycolmap).
 bench: $(STAMP)
 	$(VENV)/bin/pip install -q -e '.[$(ROS),test,bench]'
 	$(PY) bench/bench_core.py
-	$(PY) bench/bench_node.py --frames 600
-	$(PY) bench/accuracy.py --frames 60
-	$(PY) bench/window_accuracy.py
-	$(PY) bench/peers.py --frames 40
+	$(PY) bench/bench_node.py --frames 300 --closed-loop-frames 30
+	$(PY) bench/bench_node.py --frames 300 --closed-loop-frames 30 --slow-ms 100
+	$(PY) bench/world_accuracy.py --frames 60 --sequences 8
+	$(PY) bench/world_accuracy.py --frames 60 --sequences 8 --heldout
+	$(PY) bench/world_calibration.py --frames 60
 	$(PY) bench/paper_simulation.py --out docs
 
 clean:
