@@ -276,7 +276,7 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     # focal length by e * z / relief: far, flat objects say little. The fit removes the error's
     # gradient over each object; what it cannot see (the field's curvature) is taken to be as
     # large as the gradients it found, pooled over the frame's objects.
-    e = opt["unseen_depth_error"] * np.sqrt(np.mean(fits.tilt[good] ** 2)) if good.any() else 0.0
+    e = opt["unseen_depth_error"] * np.sqrt(np.mean(fits.tilt[good] ** 2))
     var = fits.var_log_focal + (e * fits.translation[:, 2] / np.maximum(fits.relief, 1e-9)) ** 2
     # A NOCS map that is not this object's shape (the category prior's) errs in f about as much
     # as it misfits the shape; a perfect map leaves only noise in the unexplained share.

@@ -220,7 +220,7 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         obj = mask > 0
     depth = depth * state.scale + state.offset
     if e.field > 0:
-        total = sum(self_f for self_f in (state._field(("depth", c), rng, h, w, c) for c in e.field_cells))
+        total = sum(state._field(("depth", c), rng, h, w, c) for c in e.field_cells)
         depth *= 1.0 + e.field * total / np.sqrt(len(e.field_cells))
     if e.depth_pixel > 0:
         depth *= 1.0 + e.depth_pixel * rng.normal(size=(h, w))
