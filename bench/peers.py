@@ -19,6 +19,7 @@ import numpy as np
 
 from fcop_ros import estimate_focal
 from fcop_ros.core import PAPER_FCOP_IS
+from fcop_ros.core.camera import image_centre
 from fcop_ros.core.correspondences import extract_instances
 from fcop_ros.core.pose import rotation_angle_deg
 from fcop_ros.synthetic import PRESETS, apply_noise, render_scene
@@ -31,7 +32,7 @@ def p4pf(frame, max_points=1000, seed=0):
     import pycolmap
 
     h, w = frame.depth.shape
-    cx, cy = (w - 1) / 2, (h - 1) / 2
+    cx, cy = image_centre(w, h)
     rng = np.random.default_rng(seed)
     instances = extract_instances(frame.depth, frame.nocs, frame.mask, (cx, cy), rng=rng, max_pixels=max_points)
     focals, rots = [], {}

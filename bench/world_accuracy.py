@@ -27,6 +27,7 @@ from scipy import ndimage
 
 from fcop_ros import FocalWindow, estimate_focal, interval_stabbing, solve_triplets
 from fcop_ros.core import PAPER_FCOP_IS
+from fcop_ros.core.camera import image_centre
 from fcop_ros.core.stabbing import focal_intervals
 from fcop_ros.synthetic.world import WORLD_PRESETS, ZERO_MEAN_FAMILIES, world_frame, world_frames
 
@@ -39,7 +40,7 @@ def plain_reference(fr, rng):
     instance, 2 px erosion, triplets with well-separated NOCS among random candidates, interval
     stabbing with a 1% relative bound."""
     h, w = fr.depth.shape
-    cx, cy = (w - 1) / 2, (h - 1) / 2
+    cx, cy = image_centre(w, h)
     xs, ds, ps, tris, off = [], [], [], [], 0
     for iid in np.unique(fr.mask[fr.mask > 0]):
         m = ndimage.binary_erosion(fr.mask == iid, iterations=2) & np.isfinite(fr.depth) & (fr.nocs.sum(-1) > 0)

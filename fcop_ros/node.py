@@ -40,6 +40,7 @@ from msg_adapters import (ImageFormatError, camera_info, depth_from_image, marke
                           nocs_from_image, object_poses, pose_array, stamp_ns)
 
 from .core import FocalWindow, estimate_focal
+from .core.camera import image_centre
 from .sync import StampSynchronizer
 
 INPUTS = ("depth", "nocs", "mask")
@@ -397,8 +398,8 @@ class FcopNode(Node):
             raise _Reject("camera_info_size_mismatch",
                           f"camera_info_in is {cam.width}x{cam.height}, the images are {w}x{h}")
         use_cam = cam is not None and (cam.k[2] != 0 or cam.k[5] != 0)
-        cx = p["principal_point_x"] if p["principal_point_x"] >= 0 else cam.k[2] if use_cam else (w - 1) / 2.0
-        cy = p["principal_point_y"] if p["principal_point_y"] >= 0 else cam.k[5] if use_cam else (h - 1) / 2.0
+        cx = p["principal_point_x"] if p["principal_point_x"] >= 0 else cam.k[2] if use_cam else image_centre(w, h)[0]
+        cy = p["principal_point_y"] if p["principal_point_y"] >= 0 else cam.k[5] if use_cam else image_centre(w, h)[1]
         if not (0 <= cx <= w - 1 and 0 <= cy <= h - 1):
             raise _Reject("principal_point_outside",
                           f"principal point ({cx}, {cy}) is outside the {w}x{h} image")

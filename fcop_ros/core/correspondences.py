@@ -29,7 +29,8 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-_MAD = 1.4826
+from .camera import image_centre
+from .robust import MAD_TO_SIGMA
 
 
 @dataclass
@@ -129,7 +130,7 @@ def _second_diff_sigma(img: np.ndarray, ok: np.ndarray) -> float:
     if v.size < 8:
         return 0.0
     v = _thin(v)
-    return _MAD * _median(np.abs(v - _median(v))) / np.sqrt(6.0)
+    return MAD_TO_SIGMA * _median(np.abs(v - _median(v))) / np.sqrt(6.0)
 
 
 def _median(v: np.ndarray) -> float:
@@ -188,7 +189,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
     depth, nocs, mask = check_images(depth, nocs, mask)
     h, w = depth.shape
     if principal_point is None:
-        cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
+        cx, cy = image_centre(w, h)
     else:
         cx, cy = (float(v) for v in principal_point)
     rng = np.random.default_rng() if rng is None else rng
@@ -249,8 +250,8 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                 rd = np.abs(dz - md)
                 dp = pz - mp
                 rp = np.sqrt(dp[..., 0] ** 2 + dp[..., 1] ** 2 + dp[..., 2] ** 2)
-                thr_d = outlier_sigma * max(_MAD * _median(_thin(rd[ok])), 1e-9 * depth_med)
-                thr_p = outlier_sigma * max(_MAD * _median(_thin(rp[ok])), 1e-9)
+                thr_d = outlier_sigma * max(MAD_TO_SIGMA * _median(_thin(rd[ok])), 1e-9 * depth_med)
+                thr_p = outlier_sigma * max(MAD_TO_SIGMA * _median(_thin(rp[ok])), 1e-9)
                 ok2 = ok & (rd <= thr_d) & (rp <= thr_p)
                 if ok2.sum() >= max(min_object_pixels, 3) and not np.array_equal(ok2, ok):
                     ok = ok2
@@ -263,7 +264,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                 g = _gradient(md, ok)
                 gv = g[ok & (g > 0)]
                 if gv.size >= 8:
-                    thr_g = edge_sigma * _MAD * _median(_thin(gv)) + noise_floor * depth_med
+                    thr_g = edge_sigma * MAD_TO_SIGMA * _median(_thin(gv)) + noise_floor * depth_med
                     ok2 = ok & (g <= thr_g)
                     if ok2.sum() >= max(min_object_pixels, 3):
                         ok = ok2

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .combine import random_effects
+from .camera import image_centre
 from .correspondences import Instance, check_images, extract_instances
 from .object_fit import fit_objects
 from .pose import ObjectPose, umeyama
@@ -211,7 +212,7 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     opt = _options(options)
     depth, nocs, mask = check_images(depth, nocs, mask)
     h, w = depth.shape
-    pp = ((w - 1) / 2.0, (h - 1) / 2.0) if principal_point is None else tuple(float(v) for v in principal_point)
+    pp = image_centre(w, h) if principal_point is None else tuple(float(v) for v in principal_point)
     rng = np.random.default_rng(opt["seed"])
     base = dict(principal_point=pp, image_size=(w, h), method=opt["method"])
     instances = extract_instances(depth, nocs, mask, pp, min_object_pixels=opt["min_object_pixels"],

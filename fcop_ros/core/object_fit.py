@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .robust import MAD_TO_SIGMA
+
 _CAUCHY = 3.0  # robust weight 1 / (1 + (e / c)^2) of a pixel whose normalised residual is e
 
 
@@ -149,7 +151,7 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
         res = np.sqrt((diff * diff).sum(-1))
         med = np.nanmedian(np.where(V, res, np.nan), axis=1)
         med = np.where(np.isfinite(med), med, 0.0)
-        W = Vf / (1.0 + (res / np.maximum(_CAUCHY * 1.4826 * med, 1e-12)[:, None]) ** 2)
+        W = Vf / (1.0 + (res / np.maximum(_CAUCHY * MAD_TO_SIGMA * med, 1e-12)[:, None]) ** 2)
     logs = np.log(np.maximum(s, 1e-12))
     Rm = Q
     npar = (7 if fix_focal else 8) + (2 if depth_tilt else 0)

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .estimator import FocalEstimate
+from .robust import MAD_TO_SIGMA
 
-_MAD = 1.4826
 
 
 @dataclass
@@ -134,8 +134,8 @@ class FocalWindow:
         # Transient spread: from successive differences (a single step barely moves their median)
         # and from the spread about the median (slowly drifting errors, which successive
         # differences miss; a step in a minority of frames barely moves it), the larger.
-        t = max((_MAD * np.median(np.abs(np.diff(y)))) ** 2 / 2.0,
-                (_MAD * np.median(np.abs(y - np.median(y)))) ** 2, 1e-6)
+        t = max((MAD_TO_SIGMA * np.median(np.abs(np.diff(y)))) ** 2 / 2.0,
+                (MAD_TO_SIGMA * np.median(np.abs(y - np.median(y)))) ** 2, 1e-6)
         # Medians of the older and newer frames (a lone wild frame moves neither), their standard
         # errors sqrt(pi / 2) times those of means.
         cut = np.arange(k, n - k + 1)  # the first newer frame

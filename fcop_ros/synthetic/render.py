@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.camera import image_centre
+
 # Primitives in design units, y up: ("box", centre, half extents), ("cyl", centre, radius,
 # half height, top cap, bottom cap), ("cap", centre, radius, y cut: keep y <= cut).
 SHAPES = {
@@ -163,7 +165,7 @@ def render(objects, focal: float, width: int = 640, height: int = 480, principal
            table=None) -> Frame:
     """Ray-cast the objects at pixel centres. ``table`` = (point, normal) in the camera frame
     gives the background plane's depth (mask 0, NOCS 0); without it the background is NaN."""
-    cx, cy = ((width - 1) / 2, (height - 1) / 2) if principal_point is None else principal_point
+    cx, cy = image_centre(width, height) if principal_point is None else principal_point
     depth = np.full((height, width), np.inf)
     nocs = np.zeros((height, width, 3))
     mask = np.zeros((height, width), np.uint16)
