@@ -69,7 +69,9 @@ class FocalEstimate:
 
     focal: focal length in pixels (fx = fy), or None when the frame gives no evidence (then
     ``reason`` says why). std_rel: relative standard error of focal (from the objects' fits and
-    their disagreement). focal_votes: the stabbed value of the triplet votes. interval: (lo, hi)
+    their disagreement). std_rel_noise: the part of std_rel that pixel noise makes, which a new
+    frame draws anew (the rest, from shape mismatch, unseen depth error and the objects'
+    disagreement, repeats while the same objects are in view). focal_votes: the stabbed value of the triplet votes. interval: (lo, hi)
     focal range in pixels of the maximal consensus region. inlier_count / inlier_ratio: votes
     agreeing with it. votes_per_object / inliers_per_object: {instance_id: count}.
     object_focals: {instance_id: (focal, std_rel)} of the objects combined; rejected:
@@ -87,6 +89,7 @@ class FocalEstimate:
     interval: tuple[float, float] | None = None
     focal_votes: float | None = None
     std_rel: float | None = None
+    std_rel_noise: float | None = None
     votes_per_object: dict = field(default_factory=dict)
     inliers_per_object: dict = field(default_factory=dict)
     object_focals: dict = field(default_factory=dict)
@@ -297,6 +300,9 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     # far, shallow object fits a similarity of almost any shape.
     used = [inst for inst, u in zip(kept, comb.used)
             if u and est.object_focals[inst.instance_id][1] <= opt["pose_max_std"]]
+    # Of the combination's variance sum(w^2 (v + tau^2)) / sum(w)^2, the fits' curvature is noise.
+    w = 1.0 / (var[good][comb.used] + comb.tau2)
+    est.std_rel_noise = float(np.sqrt(np.sum(w * w * fits.var_log_focal[good][comb.used])) / w.sum())
     return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var)), used, opt, rng)
 
 

@@ -1,17 +1,22 @@
 """Sliding window of focal evidence over recent frames, with zoom (focal change) detection.
 
-Each frame contributes its estimate y_t = log f_t and its variance v_t = std_rel_t^2. The
-window's estimate weights every frame by 1 / v_t. Its uncertainty separates what the frames
-share from what varies between them: the spread s^2 of the frames about the window estimate is
-error that averaging removes (transient, T = min(s^2 + one standard error, mean v)); the rest of a frame's stated
-variance, P = mean v - T, is error every frame repeats (the same objects with the same shape
-mismatch) and averaging cannot remove. So V = P + T / n: frames that disagree as much as their
-uncertainty says make the window n times surer; frames that agree far more closely than it
-says reveal persistent error and the window stays as unsure as one frame.
+Each frame contributes its estimate y_t = log f_t, its variance v_t = std_rel_t^2 and the part
+of it that pixel noise makes, n_t = std_rel_noise_t^2 (a new frame draws it anew). The rest,
+v_t - n_t, is the frame's systematic error budget (shape mismatch, unseen depth error, the
+objects' disagreement): it repeats while the same objects are in view, unless the frames show
+otherwise. The window's estimate weights every frame by 1 / v_t. Its variance is
 
-When the frames disagree more than their stated variances, their spread is the frame variance
-instead; and errors that drift slowly between frames (lag-one autocorrelation rho) average out
-over n (1 - rho) / (1 + rho) frames, not n.
+    V = max(B - Q, 0) + max(S^2, N) / n_eff
+
+with S^2 the frames' spread about the estimate, N their noise variance, B their systematic
+budget (the median of v_t - n_t) and Q = S^2 (1 - sqrt(2 / n_eff)) - N the variation beyond
+noise that the spread shows beyond doubt (its one-standard-error lower bound): that much of the
+budget varies from frame to frame and averages out; the rest cannot. Errors that drift slowly
+(lag-one autocorrelation rho) average out over n_eff = n (1 - rho) / (1 + rho) frames, not n.
+A frame without ``std_rel_noise`` counts as all noise.
+
+Frames further than ``reject_sigma`` robust standard deviations of the frames' own spread (at
+least their noise) from the median are left out: a frame whose objects were all wrong.
 
 A zoom is a change point: for every split of the window into older and newer frames (at least
 ``change_frames`` newer), the difference of the two medians is compared with its standard error
@@ -28,7 +33,6 @@ import numpy as np
 
 from .estimator import FocalEstimate
 from .robust import MAD_TO_SIGMA
-
 
 
 @dataclass
@@ -56,6 +60,7 @@ class _Frame:
     stamp: float
     logf: float | None
     var: float
+    noise: float
     support: int
     size: tuple | None
 
@@ -74,7 +79,7 @@ class FocalWindow:
     """
 
     def __init__(self, max_frames: int = 30, max_age: float | None = None, min_frames: int = 1,
-                 min_support: int = 30, change_threshold: float = 0.08, change_sigma: float = 5.0,
+                 min_support: int = 30, change_threshold: float = 0.08, change_sigma: float = 6.0,
                  change_frames: int = 3, reject_sigma: float = 4.0):
         if max_frames < 1:
             raise ValueError("max_frames must be >= 1")
@@ -107,9 +112,11 @@ class FocalWindow:
         if new_size:
             self._frames.clear()
         ok = estimate.focal is not None and estimate.std_rel is not None and estimate.std_rel > 0
+        var = float(estimate.std_rel) ** 2 if ok else np.inf
+        noise = getattr(estimate, "std_rel_noise", None)
+        noise = min(float(noise) ** 2, var) if ok and noise is not None and noise > 0 else var
         self._frames.append(_Frame(float(stamp), float(np.log(estimate.focal)) if ok else None,
-                                   float(estimate.std_rel) ** 2 if ok else np.inf,
-                                   int(estimate.inlier_count), size))
+                                   var, noise, int(estimate.inlier_count), size))
         while len(self._frames) > self.max_frames:
             self._frames.popleft()
         if self.max_age is not None:
@@ -122,36 +129,38 @@ class FocalWindow:
 
     def _rated(self):
         rated = [f for f in self._frames if f.logf is not None]
-        return rated, np.array([f.logf for f in rated]), np.array([f.var for f in rated])
+        return (rated, np.array([f.logf for f in rated]), np.array([f.var for f in rated]),
+                np.array([f.noise for f in rated]))
 
     def _detect_change(self) -> bool:
         """True (and the older frames dropped) when the newer frames moved away from the older."""
-        rated, y, v = self._rated()
+        rated, y, _, _ = self._rated()
         k = self.change_frames
         n = y.size
         if n < 2 * k:
             return False
-        # Transient spread: from successive differences (a single step barely moves their median)
-        # and from the spread about the median (slowly drifting errors, which successive
-        # differences miss; a step in a minority of frames barely moves it), the larger.
-        t = max((MAD_TO_SIGMA * np.median(np.abs(np.diff(y)))) ** 2 / 2.0,
-                (MAD_TO_SIGMA * np.median(np.abs(y - np.median(y)))) ** 2, 1e-6)
-        # Medians of the older and newer frames (a lone wild frame moves neither), their standard
-        # errors sqrt(pi / 2) times those of means.
+        # Medians of the older and newer frames for every split (a lone wild frame moves
+        # neither); the most likely split is the one whose difference stands out most.
         cut = np.arange(k, n - k + 1)  # the first newer frame
         old = np.array([np.median(y[:c]) for c in cut])
         new = np.array([np.median(y[c:]) for c in cut])
         diff = new - old
-        # Slowly drifting errors make neighbouring frames alike: each segment holds fewer
-        # independent frames (lag-one autocorrelation of the older half, before a recent step).
-        r = y[: n // 2] - np.median(y[: n // 2])
-        rho = _lag_one(r) if r.size > 3 else 0.0
+        best = int(np.argmax(np.abs(diff) * np.sqrt(cut * (n - cut))))
+        c = int(cut[best])
+        # The frames' transient spread about the two segments' medians (a step must not count as
+        # spread), and from successive differences, the larger. Slowly drifting errors make
+        # neighbouring frames alike: each segment holds fewer independent frames (lag-one
+        # autocorrelation of those residuals). The medians' standard errors are sqrt(pi / 2)
+        # times those of means.
+        r = y - np.where(np.arange(n) < c, old[best], new[best])
+        t = max((MAD_TO_SIGMA * np.median(np.abs(np.diff(y)))) ** 2 / 2.0,
+                (MAD_TO_SIGMA * np.median(np.abs(r))) ** 2, 1e-6)
+        rho = _lag_one(r) if n > 3 else 0.0
         t *= (1.0 + rho) / (1.0 - rho)
-        z = np.abs(diff) / np.sqrt(np.pi / 2 * (t / cut + t / (n - cut)))
-        hit = (z > self.change_sigma) & (np.abs(diff) > np.log1p(self.change_threshold))
-        if not hit.any():
+        z = abs(diff[best]) / np.sqrt(np.pi / 2 * (t / c + t / (n - c)))
+        if not (z > self.change_sigma and abs(diff[best]) > np.log1p(self.change_threshold)):
             return False
-        first = rated[int(cut[np.flatnonzero(hit)[np.argmax(z[hit])]])]
+        first = rated[c]
         while self._frames[0] is not first:
             self._frames.popleft()
         self.changes += 1
@@ -159,7 +168,7 @@ class FocalWindow:
 
     def _estimate(self) -> WindowEstimate:
         frames = list(self._frames)
-        rated, y, v = self._rated()
+        rated, y, v, noise = self._rated()
         n_all = len(frames)
         support = int(sum(f.support for f in rated))
         if y.size < self.min_frames:
@@ -168,31 +177,24 @@ class FocalWindow:
         if support < self.min_support:
             return WindowEstimate(None, frames=n_all, support=support,
                                   reason=f"too little evidence: {support} agreeing votes")
-        keep = np.ones(y.size, dtype=bool)
         if y.size >= 3:
             med = np.median(y)
-            keep = np.abs(y - med) <= self.reject_sigma * np.sqrt(v)
-            if not keep.any():
-                keep[:] = True
-        y, v = y[keep], v[keep]
+            spread = max(MAD_TO_SIGMA * np.median(np.abs(y - med)), float(np.sqrt(np.median(noise))))
+            keep = np.abs(y - med) <= self.reject_sigma * spread
+            y, v, noise = y[keep], v[keep], noise[keep]
         w = 1.0 / v
         mean = float(np.sum(w * y) / w.sum())
         n = y.size
-        var = 1.0 / w.sum()  # independent frames that are as uncertain as they say
+        budget = float(np.median(v - noise))
+        noise_var = n / float(np.sum(1.0 / noise))
+        var = budget + noise_var / n  # too few frames to see what varies
         if n >= 3:
             r = y - mean
-            # Dispersion: 1 when the frames disagree as much as their std_rel say. Above it, their
-            # spread is the truth (variances scaled up); clearly below it (beyond one standard
-            # error), the frames share error that no averaging removes (the persistent part).
-            phi = float(np.sum(w * r * r) / (n - 1))
-            v_frame = n * var  # the harmonic mean of the frames' variances
-            # The shared part, judged against a typical frame (the median: one very unsure frame
-            # must not inflate it, nor the most confident frames shrink it).
-            persistent = max(1.0 - phi - np.sqrt(2.0 / (n - 1)), 0.0) * float(np.median(v))
-            # Errors that drift slowly from frame to frame average out over fewer frames.
+            spread2 = float(np.sum(w * r * r) / (n - 1)) * n / float(w.sum())
             rho = _lag_one(r)
             n_eff = max(n * (1.0 - rho) / (1.0 + rho), 1.0)
-            var = persistent + max(max(phi, 1.0) * v_frame - persistent, 0.0) / n_eff
+            varies = max(spread2 * max(1.0 - np.sqrt(2.0 / n_eff), 0.0) - noise_var, 0.0)
+            var = max(budget - varies, 0.0) + max(spread2, noise_var) / n_eff
         return WindowEstimate(float(np.exp(mean)), float(np.sqrt(var)), support, n_all, n)
 
 
