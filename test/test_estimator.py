@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from conftest import BAD_CASES, clean_frame, corrupted, noisy_frame
 from fcop_ros import FocalEstimate, estimate_focal
 from fcop_ros.core.pose import rotation_angle_deg
+from fcop_ros.synthetic.scenes import BAD_CASES, clean_frame, corrupted, noisy_frame
 
 
 def _match(est, frame):

@@ -13,8 +13,9 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from conftest import BAD_CASES, clean_frame, corrupted
 from fcop_ros.core.pose import rotation_angle_deg
+from fcop_ros.synthetic.scenes import (BAD_CASES, camera_frame as cam, camera_frames, clean_frame,
+                                       corrupted)
 from ros_helpers import Gate, Recorder, frame_messages, harness, header, spin_until, stamp_ns  # noqa: F401
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config", "fcop.yaml")
@@ -31,27 +32,10 @@ ROT_MEDIAN_BOUND_DEG = 3.0
 TRANS_MEDIAN_BOUND = 0.2
 
 
-def _camera_frames(n, focal, preset="moderate", first_seed=0):
-    """n frames of one camera (fixed focal) under a noise preset, cached."""
-    from fcop_ros.synthetic import apply_noise, render_scene
-    key = (n, focal, preset, first_seed)
-    if key not in _FRAMES:
-        _FRAMES[key] = [apply_noise(render_scene(np.random.default_rng(first_seed + k), 5, focal), preset,
-                                    np.random.default_rng(500 + first_seed + k)) for k in range(n)]
-    return _FRAMES[key]
-
-
-_FRAMES = {}
-
-
-def cam(k):
-    """Frame k of one camera: clean, 5 objects, focal 600 px (clean_frame(k) draws a focal per scene)."""
-    return clean_frame(k, 640, 480, 600.0)
-
 
 def test_camera_info_per_input_stamp_within_bound(harness):
     h = harness(parameter_overrides=[Parameter("seed", value=1)])
-    frames = _camera_frames(12, 600.0)
+    frames = camera_frames(12, 600.0)
     sent = []
     for k, fr in enumerate(frames):
         stamp = T0 + k * DT

@@ -16,8 +16,8 @@ from sensor_msgs.msg import CameraInfo
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
-from conftest import clean_frame, noisy_frame
 from fcop_ros.node import to_fcop_convention
+from fcop_ros.synthetic.scenes import camera_frame as cam, noisy_frame
 from ros_helpers import Recorder, frame_messages, harness, ros_context, rotation_errors, spin_until, stamp_ns  # noqa
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -26,9 +26,6 @@ BIN = os.path.dirname(sys.executable)
 T0 = 1_700_000_000_000_000_000
 DT = 33_333_333
 
-
-def cam(k, focal=600.0):
-    return clean_frame(k, 640, 480, focal)
 
 
 def shipped_with(tmp_path, **changes):

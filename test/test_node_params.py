@@ -11,8 +11,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 
-from conftest import clean_frame, noisy_frame
 from fcop_ros.node import PARAMETERS, READ_ONLY
+from fcop_ros.synthetic.scenes import camera_frame as cam, clean_frame, noisy_frame
 from ros_helpers import (Gate, Recorder, frame_messages, harness, header, rotation_errors,  # noqa: F401
                          spin_until, stamp_ns)
 
@@ -20,9 +20,6 @@ BIN = os.path.dirname(sys.executable)
 T0 = 1_700_000_000_000_000_000
 DT = 33_333_333
 
-
-def cam(k, focal=600.0):
-    return clean_frame(k, 640, 480, focal)
 
 
 def values(status):

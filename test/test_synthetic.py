@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from conftest import clean_frame
 from fcop_ros.synthetic import PRESETS, apply_noise, render, render_scene
 from fcop_ros.synthetic.render import SceneObject
+from fcop_ros.synthetic.scenes import clean_frame
 
 
 def test_rendered_pixels_obey_the_camera_model_exactly():

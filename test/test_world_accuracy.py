@@ -1,21 +1,20 @@
 """The estimator on the randomised world: no bias from zero-mean errors, an honest std_rel,
 refusal of NOCS that only look like evidence, reflection invariance, the focal range, and a
 frame with 10,000 instances. Numbers in the comments were measured on these seeds."""
-import functools
 import time
 
 import numpy as np
 import pytest
 
 from fcop_ros import FocalWindow, estimate_focal
-from fcop_ros.synthetic.world import ZERO_MEAN_FAMILIES, world_frame, world_frames
+from fcop_ros.synthetic import scenes
+from fcop_ros.synthetic.world import ZERO_MEAN_FAMILIES, world_frames
 
 FIRST_SEED = 7000  # not the tuning seeds (1000..) nor the held-out ones (900000..)
 
 
-@functools.lru_cache(maxsize=None)
 def frame(preset, seed, size=None):
-    return world_frame(preset, FIRST_SEED + seed, size=size)
+    return scenes.world_frame(preset, FIRST_SEED + seed, size)
 
 
 def signed_errors(preset, n):
