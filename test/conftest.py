@@ -1,6 +1,10 @@
-"""The suite's environment: DDS kept on this machine, in a domain of its own, with the shipped
-profile. Scenes and bad inputs are in fcop_ros.synthetic.scenes, the ROS harness in ros_helpers."""
+"""The suite's environment (DDS kept on this machine, in a domain of its own, with the shipped
+profile) and a per-test seeded generator. Scenes and bad inputs are in fcop_ros.synthetic.scenes,
+the ROS harness in ros_helpers."""
 import os
+
+import numpy as np
+import pytest
 
 from fcop_ros.dds import profile_env_vars, ros_distro
 
@@ -18,3 +22,8 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(50 + os.getpid() % 150))
 for _var in profile_env_vars():
     os.environ.setdefault(_var, os.path.join(_CONFIG, "fastdds_large_images.xml"))
 
+
+@pytest.fixture
+def rng():
+    """A generator seeded afresh for every test: its data never depends on which tests ran."""
+    return np.random.default_rng(0)
