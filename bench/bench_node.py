@@ -15,13 +15,11 @@ Memory: resident set size sampled over the paced run (flat means no growth per f
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
-import sys
 import time
 
 import numpy as np
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "test"))
 
 
 def rss_mb() -> float:
@@ -30,6 +28,41 @@ def rss_mb() -> float:
             if line.startswith("VmRSS:"):
                 return int(line.split()[1]) / 1024
     return float("nan")
+
+
+@contextlib.contextmanager
+def ros_context():
+    """A private, initialised Context and a SingleThreadedExecutor on it; both shut down after."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    ctx = Context()
+    rclpy.init(context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    try:
+        yield ctx, executor
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        ctx.try_shutdown()
+
+
+def spin_until(executor, condition, timeout: float, step: float = 0.02) -> bool:
+    """Spin until ``condition()`` holds or the deadline passes (the test harness's loop; the
+    benchmark keeps its own copy rather than reaching into test/)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not condition():
+        executor.spin_once(timeout_sec=step)
+    return bool(condition())
+
+
+def frame_messages(frame):
+    """Depth (32FC1), NOCS (32FC3) and mask (mono8) Image messages of a rendered frame."""
+    from std_msgs.msg import Header
+
+    from msg_adapters import depth_to_image, mask_to_image, nocs_to_image
+    h = Header(frame_id="camera_optical_frame")
+    return (depth_to_image(frame.depth, "32FC1", h), nocs_to_image(frame.nocs, "32FC3", h),
+            mask_to_image(frame.mask, "mono8", h))
 
 
 def main() -> None:
@@ -60,11 +93,10 @@ def main() -> None:
         node_module.estimate_focal = slow
     from msg_adapters import stamp_ns
     from fcop_ros.synthetic import apply_noise, render_scene
-    from ros_helpers import frame_messages, ros_context, spin_until
 
     frames = [apply_noise(render_scene(np.random.default_rng(k), 5, 600.0), "moderate", np.random.default_rng(k))
               for k in range(20)]
-    msgs = [frame_messages(fr, 0) for fr in frames]
+    msgs = [frame_messages(fr) for fr in frames]
     print(f"machine: {os.cpu_count()} cores, pinned to {len(os.sched_getaffinity(0))}; "
           f"{args.frames} frames 640x480, 5 objects, preset moderate, estimator slowed by {args.slow_ms:g} ms")
     with ros_context() as (ctx, ex):

@@ -18,9 +18,7 @@ frames until the window stays within 5% of the new focal length, and restarts on
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
@@ -30,9 +28,8 @@ from fcop_ros.core import PAPER_FCOP_IS
 from fcop_ros.core.camera import image_centre
 from fcop_ros.core.stabbing import focal_intervals
 from fcop_ros.synthetic.world import WORLD_PRESETS, ZERO_MEAN_FAMILIES, world_frame, world_frames
+from peers import p4pf  # bench/peers.py: the script's own folder is on the path when run as a script
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from peers import p4pf  # noqa: E402
 
 
 def plain_reference(fr, rng):
