@@ -1,6 +1,6 @@
 """The suite's environment (DDS kept on this machine, in a domain of its own, with the shipped
 profile) and a per-test seeded generator. Scenes and bad inputs are in fcop_ros.synthetic.scenes,
-the ROS harness in ros_helpers."""
+the ROS harness (and its ``harness`` fixture, registered below) in ros_helpers."""
 import os
 
 import numpy as np
@@ -21,6 +21,10 @@ if ros_distro() in ("humble", "iron"):  # no discovery range before Jazzy
 os.environ.setdefault("ROS_DOMAIN_ID", str(50 + os.getpid() % 150))
 for _var in profile_env_vars():
     os.environ.setdefault(_var, os.path.join(_CONFIG, "fastdds_large_images.xml"))
+
+# The harness fixture, for every test without importing it by name (a name the test function's
+# argument would shadow).
+pytest_plugins = ["ros_helpers"]
 
 
 @pytest.fixture

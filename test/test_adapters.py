@@ -10,9 +10,10 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from fcop_ros.core.pose import ObjectPose
-from msg_adapters import (DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS, ImageFormatError, camera_info,
-                          depth_from_image, depth_to_image, image_to_array, mask_from_image, mask_to_image,
-                          marker_array, nocs_from_image, nocs_to_image, pose_array)
+from msg_adapters import (DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS, ImageFormatError,
+                          camera_info, depth_from_image, depth_to_image, image_to_array,
+                          mask_from_image, mask_to_image, marker_array, nocs_from_image,
+                          nocs_to_image, pose_array)
 
 H, W = 7, 11
 
@@ -68,7 +69,8 @@ def test_nocs_round_trip(encoding, pad, big, rng):
     p = nocs_sample(rng)
     msg = repad(nocs_to_image(p, encoding), pad, big)
     back = nocs_from_image(msg)
-    tol = {"rgb8": 0.5 / 255 + 1e-6, "bgr8": 0.5 / 255 + 1e-6, "16UC3": 0.5 / 65535 + 1e-7}.get(encoding, 1e-6)
+    tol = {"rgb8": 0.5 / 255 + 1e-6, "bgr8": 0.5 / 255 + 1e-6,
+           "16UC3": 0.5 / 65535 + 1e-7}.get(encoding, 1e-6)
     np.testing.assert_allclose(back, p, atol=tol)
     assert (back[1, 1] == 0).all()
 
@@ -86,14 +88,19 @@ def test_mask_round_trip(encoding, pad, big, rng):
     top = 255 if encoding in ("mono8", "8UC1") else 60000
     m = rng.integers(0, top, (H, W))
     back = mask_from_image(repad(mask_to_image(m, encoding), pad, big))
-    assert back.dtype == {"mono8": np.uint8, "8UC1": np.uint8, "32SC1": np.int32}.get(encoding, np.uint16)
+    assert back.dtype == {"mono8": np.uint8, "8UC1": np.uint8, "32SC1": np.int32}.get(
+        encoding, np.uint16
+    )
     np.testing.assert_array_equal(back, m)
 
 
 def test_clear_errors(rng):
     d = depth_to_image(depth_sample(rng), "32FC1")
     wrong = Image(height=H, width=W, encoding="rgb8", step=W * 3, data=bytes(H * W * 3))
-    with pytest.raises(ImageFormatError, match=r"depth: unsupported encoding 'rgb8'; supported: 32FC1, 64FC1, 16UC1"):
+    with pytest.raises(
+        ImageFormatError,
+        match=r"depth: unsupported encoding 'rgb8'; supported: 32FC1, 64FC1, 16UC1",
+    ):
         depth_from_image(wrong)
     with pytest.raises(ImageFormatError, match="nocs: unsupported encoding '32FC1'"):
         nocs_from_image(d)
@@ -129,7 +136,8 @@ def test_camera_info_rep104():
     assert info.width == 640 and info.height == 480 and info.distortion_model == "plumb_bob"
     np.testing.assert_array_equal(info.k, [612.5, 0, 319.5, 0, 612.5, 239.5, 0, 0, 1])
     np.testing.assert_array_equal(info.r, np.eye(3).ravel())
-    np.testing.assert_array_equal(np.reshape(info.p, (3, 4)), np.column_stack([np.reshape(info.k, (3, 3)), np.zeros(3)]))
+    np.testing.assert_array_equal(np.reshape(info.p, (3, 4)),
+                                  np.column_stack([np.reshape(info.k, (3, 3)), np.zeros(3)]))
     assert list(info.d) == [0.0] * 5 and info.binning_x == info.binning_y == 0
     assert (info.roi.x_offset, info.roi.y_offset, info.roi.width, info.roi.height) == (0, 0, 0, 0)
     deserialize_message(serialize_message(info), CameraInfo)

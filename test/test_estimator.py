@@ -67,8 +67,8 @@ def test_ransac_variant_is_selectable():
 def test_literal_paper_method_on_clean_frame():
     """Absolute 5 px bound, no refinement, no denoising: the paper's fCOP-IS."""
     fr = clean_frame(0)
-    est = estimate_focal(fr.depth, fr.nocs, fr.mask, bound_mode="absolute", noise_bound=5.0, refine=False,
-                         denoise_radius=0, erode_px=0, outlier_sigma=0, seed=0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, bound_mode="absolute", noise_bound=5.0,
+                         refine=False, denoise_radius=0, erode_px=0, outlier_sigma=0, seed=0)
     assert abs(est.focal / fr.focal - 1) < 0.01 and est.interval[0] <= est.focal <= est.interval[1]
 
 
@@ -80,7 +80,11 @@ def _errors(preset, seeds, **opt):
         focal.append(np.nan if est.focal is None else 100 * abs(est.focal / fr.focal - 1))
         for got, true in _match(est, fr):
             rot.append(rotation_angle_deg(got.rotation, true.rotation))
-            trans.append(100 * np.linalg.norm(got.translation - true.translation) / np.linalg.norm(true.translation))
+            trans.append(
+                100
+                * np.linalg.norm(got.translation - true.translation)
+                / np.linalg.norm(true.translation)
+            )
     return np.array(focal), np.array(rot), np.array(trans)
 
 

@@ -58,7 +58,8 @@ def test_window_averages_independent_errors_and_says_so():
 def test_window_does_not_claim_to_average_away_persistent_error():
     """Frames that share one 4% error agree closely; the window must stay about as unsure as a
     frame (the shared part cannot average away). Measured: coverage 94.5% over 200 windows,
-    median std_rel 3.45% (a frame's is 4.03%; a window that believed in averaging would say 0.74%)."""
+    median std_rel 3.45% (a frame's is 4.03%; a window that believed in averaging would say
+    0.74%)."""
     rng = np.random.default_rng(1)
     cover, std = [], []
     for _ in range(200):

@@ -6,5 +6,5 @@ from .render import CATEGORIES, Frame, SceneObject, random_scene, render, render
 from .sequence import SequenceSpec, camera_sequence
 
 __all__ = ["PRESETS", "NoiseModel", "apply_noise", "PointTrial", "simulate_points",
-           "simulate_triplet_batch", "CATEGORIES", "Frame", "SceneObject", "random_scene", "render",
-           "render_scene", "SequenceSpec", "camera_sequence"]
+           "simulate_triplet_batch", "CATEGORIES", "Frame", "SceneObject",
+           "random_scene", "render", "render_scene", "SequenceSpec", "camera_sequence"]

@@ -22,7 +22,8 @@ class NoiseModel:
     depth_smooth: amplitude of a smooth relative error field (a few cells across the image);
     depth_pixel: sigma of independent per-pixel relative noise;
     edge_px: width of the band around depth discontinuities where depth bleeds across the edge;
-    nocs_sigma: sigma of per-pixel NOCS noise; nocs_outliers: share of object pixels with random NOCS;
+    nocs_sigma: sigma of per-pixel NOCS noise;
+    nocs_outliers: share of object pixels with random NOCS;
     mask_px: each instance mask is eroded or dilated by up to this many pixels (dilated pixels
     take the background depth and the nearest NOCS, like a real predictor);
     blobs: number of spurious instances with random NOCS.
@@ -75,8 +76,16 @@ def apply_noise(frame: Frame, model: NoiseModel | str, rng: np.random.Generator)
     if model.mask_px > 0:
         new = np.zeros_like(mask)
         ids = np.unique(mask[mask > 0])
-        near_nocs = np.stack([cv2.dilate(nocs[..., c].astype(np.float32), np.ones((2 * model.mask_px + 1,) * 2,
-                                                                                   np.uint8)) for c in range(3)], -1)
+        near_nocs = np.stack(
+            [
+                cv2.dilate(
+                    nocs[..., c].astype(np.float32),
+                    np.ones((2 * model.mask_px + 1,) * 2, np.uint8),
+                )
+                for c in range(3)
+            ],
+            -1,
+        )
         for iid in ids:
             m = (mask == iid).astype(np.uint8)
             r = int(rng.integers(-model.mask_px, model.mask_px + 1))

@@ -58,8 +58,10 @@ BAD_CASES = {
     "nocs_zero": lambda d, n, m: n.fill(0.0),
     "nocs_nan": lambda d, n, m: n.fill(np.nan),
     "single_pixel": lambda d, n, m: (m.fill(0), m.__setitem__((200, 300), 1)),
-    "tiny_objects": lambda d, n, m: (m.fill(0), m.__setitem__((slice(100, 105), slice(100, 105)), 1)),
-    "planar": lambda d, n, m: d.fill(1.0),  # every object flat at one depth: all triplets degenerate
+    "tiny_objects": lambda d, n, m: (m.fill(0),
+                                     m.__setitem__((slice(100, 105), slice(100, 105)), 1)),
+    # every object flat at one depth: all triplets degenerate
+    "planar": lambda d, n, m: d.fill(1.0),
 }
 
 
