@@ -15,6 +15,9 @@ Named presets (``WORLD_PRESETS``):
   Calibrated so that the paper's method taken literally scores near the paper's 6.87% (REAL275).
 - ``only_<family>``: one zero-mean mechanism alone, for bias tests.
 
+The older fixed presets of :mod:`fcop_ros.synthetic.noise` (``mild``, ``moderate``, ``harsh``)
+are fixed settings of these same mechanisms: each is written once, in :func:`apply_errors`.
+
 The held-out variant (``variant="heldout"``) builds its smooth fields from random sinusoids
 instead of interpolated grids, its NOCS distortion from a quadratic warp instead of a field and
 its mask errors with an elliptic kernel: a different error model with the same strengths.
