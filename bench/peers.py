@@ -83,8 +83,7 @@ def main() -> None:
     print(
         f"{args.frames} frames per preset, 640x480, 5 objects, f = 600 px. "
         "Cells: median / p90 |focal error| %, median rotation error deg, median translation error "
-        "% of the "
-        "distance, frames with an estimate, ms per frame\n"
+        "% of the distance, frames with an estimate, ms per frame\n"
     )
     names = (
         list(methods)
@@ -133,8 +132,7 @@ def main() -> None:
             cell = (
                 (
                     f"{np.median(e[ok]):.2f} / {np.percentile(e[ok], 90):.2f}, {rot_text}, "
-                    f"{trans_text}, "
-                    f"{ok.mean():.0%}, {np.median(ms):.0f} ms"
+                    f"{trans_text}, {ok.mean():.0%}, {np.median(ms):.0f} ms"
                 )
                 if ok.any()
                 else "-"

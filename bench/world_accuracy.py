@@ -184,8 +184,7 @@ def window(presets, sequences, first_seed, variant):
         ratio = np.median(win) / np.median(single)
         print(
             f"| {preset} | {100 * np.median(single):.2f} | {100 * np.median(win):.2f} | "
-            f"{ratio:.2f} | "
-            f"{100 * np.mean(cover):.0f}% | {restarts} | {sorted(delays)} |",
+            f"{ratio:.2f} | {100 * np.mean(cover):.0f}% | {restarts} | {sorted(delays)} |",
             flush=True,
         )
 
@@ -214,8 +213,7 @@ def main() -> None:
     )
     print(
         f"{'HELD-OUT' if args.heldout else 'tuning'} set: error model '{variant}', frames from "
-        f"seed {frame_seed}, "
-        f"sequences from seed {seq_seed}\n"
+        f"seed {frame_seed}, sequences from seed {seq_seed}\n"
     )
     presets = ["sensor", "predicted"]
     if "single" in args.parts:
