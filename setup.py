@@ -8,9 +8,9 @@ import glob
 from setuptools import find_packages, setup
 
 package_name = "fcop_ros"
-_ROS_PACKAGES = ["rclpy[fastrtps]", "rcl-interfaces", "sensor-msgs", "std-msgs", "geometry-msgs", "visualization-msgs",
-                 "diagnostic-msgs", "std-srvs", "builtin-interfaces", "rosgraph-msgs", "ament-index-python",
-                 "ament-package"]
+_ROS_PACKAGES = ["rclpy[fastrtps]", "rcl-interfaces", "sensor-msgs", "std-msgs", "geometry-msgs",
+                 "visualization-msgs", "diagnostic-msgs", "std-srvs", "builtin-interfaces",
+                 "rosgraph-msgs", "ament-index-python", "ament-package"]
 
 setup(
     name=package_name,
@@ -23,12 +23,12 @@ setup(
         ("share/" + package_name + "/launch", sorted(glob.glob("launch/*.launch.py"))),
     ],
     python_requires=">=3.10",
-    install_requires=["numpy", "scipy", "opencv-python-headless", "rosbags>=0.10", "mcap", "matplotlib", "tqdm",
-                      "pyyaml"],
+    install_requires=["numpy", "scipy", "opencv-python-headless", "rosbags>=0.10", "mcap",
+                      "matplotlib", "tqdm", "pyyaml"],
     extras_require={
         "kilted": ["ros-" + p for p in _ROS_PACKAGES],
         "jazzy": ["ros-jazzy-" + p for p in _ROS_PACKAGES],
-        "test": ["pytest", "pyyaml", "colcon-common-extensions", "setuptools<80"],
+        "test": ["pytest", "pyyaml", "colcon-common-extensions", "setuptools<80", "ruff"],
         "bench": ["pycolmap"],
     },
     zip_safe=True,

@@ -77,15 +77,18 @@ def main() -> None:
     ax[0].hist(logerr, bins=80, color="tab:blue")
     ax[0].set_xlabel("log10 relative focal error")
     ax[0].set_title(f"focal, 1e5 triplets ({valid:.4%} valid)")
-    for a, v, name in ((ax[1], rot, "rotation error [deg]"), (ax[2], trans, "translation error [%]"),
-                       (ax[3], scale, "scale error [%]")):
+    for a, v, name in ((ax[1], rot, "rotation error [deg]"),
+                       (ax[2], trans, "translation error [%]"), (ax[3], scale, "scale error [%]")):
         a.hist(np.log10(np.maximum(v, 1e-16)), bins=80, color="tab:green")
         a.set_xlabel("log10 " + name)
     fig.tight_layout()
     fig.savefig(os.path.join(args.out, "paper_stability.png"), dpi=90)
-    print(f"stability: median log10 relative focal error {np.median(logerr):.1f} "
-          f"(median {10 ** np.median(logerr):.1e}), valid {valid:.4%}; pose medians: rotation "
-          f"{np.median(rot):.1e} deg, translation {np.median(trans):.1e} %, scale {np.median(scale):.1e} %")
+    print(
+        f"stability: median log10 relative focal error {np.median(logerr):.1f} "
+        f"(median {10 ** np.median(logerr):.1e}), valid {valid:.4%}; pose medians: rotation "
+        f"{np.median(rot):.1e} deg, translation {np.median(trans):.1e} %, scale "
+        f"{np.median(scale):.1e} %"
+    )
 
     depth_levels = [0.0, 0.005, 0.01, 0.02, 0.05, 0.1]
     nocs_levels = [0.0, 0.005, 0.01, 0.02, 0.05, 0.1]

@@ -34,12 +34,14 @@ def p4pf(frame, max_points=1000, seed=0):
     h, w = frame.depth.shape
     cx, cy = image_centre(w, h)
     rng = np.random.default_rng(seed)
-    instances = extract_instances(frame.depth, frame.nocs, frame.mask, (cx, cy), rng=rng, max_pixels=max_points)
+    instances = extract_instances(frame.depth, frame.nocs, frame.mask, (cx, cy), rng=rng,
+                                  max_pixels=max_points)
     focals, rots = [], {}
     for inst in instances:
         # COLMAP puts the centre of the top-left pixel at (0.5, 0.5).
         uv = inst.x + [cx + 0.5, cy + 0.5]
-        cam = pycolmap.Camera(model="SIMPLE_PINHOLE", width=w, height=h, params=[0.8 * w, cx + 0.5, cy + 0.5])
+        cam = pycolmap.Camera(model="SIMPLE_PINHOLE", width=w, height=h,
+                              params=[0.8 * w, cx + 0.5, cy + 0.5])
         est = pycolmap.AbsolutePoseEstimationOptions()
         est.estimate_focal_length = True
         est.ransac.max_error = 4.0
@@ -68,21 +70,33 @@ def main() -> None:
         print("pycolmap is not installed (pip install '.[bench]'): the P4Pf row is skipped\n")
     clean = [render_scene(np.random.default_rng(k), 5, 600.0) for k in range(args.frames)]
     methods = {
-        "fcop_ros (single frame)": lambda fr, k: estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k),
-        "paper fCOP-IS literal (5 px)": lambda fr, k: estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, **LITERAL),
-        "paper fCOP-RANSAC": lambda fr, k: estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k,
-                                                           **{**LITERAL, "method": "ransac"}),
+        "fcop_ros (single frame)": lambda fr, k: estimate_focal(
+            fr.depth, fr.nocs, fr.mask, seed=k
+        ),
+        "paper fCOP-IS literal (5 px)": lambda fr, k: estimate_focal(
+            fr.depth, fr.nocs, fr.mask, seed=k, **LITERAL
+        ),
+        "paper fCOP-RANSAC": lambda fr, k: estimate_focal(
+            fr.depth, fr.nocs, fr.mask, seed=k, **{**LITERAL, "method": "ransac"}
+        ),
     }
-    print(f"{args.frames} frames per preset, 640x480, 5 objects, f = 600 px. "
-          "Cells: median / p90 |focal error| %, median rotation error deg, median translation error % of the "
-          "distance, frames with an estimate, ms per frame\n")
-    names = list(methods) + (["P4Pf LO-RANSAC + refine (pycolmap), median over objects"] if have_colmap else []) + \
-        ["median of triplet votes"]
+    print(
+        f"{args.frames} frames per preset, 640x480, 5 objects, f = 600 px. "
+        "Cells: median / p90 |focal error| %, median rotation error deg, median translation error "
+        "% of the distance, frames with an estimate, ms per frame\n"
+    )
+    names = (
+        list(methods)
+        + (["P4Pf LO-RANSAC + refine (pycolmap), median over objects"] if have_colmap else [])
+        + ["median of triplet votes"]
+    )
     print("| method | " + " | ".join(PRESETS) + " |")
     print("|---|" + "---|" * len(PRESETS))
     results = {n: [] for n in names}
     for preset in PRESETS:
-        frames = [apply_noise(fr, preset, np.random.default_rng(1000 + k)) for k, fr in enumerate(clean)]
+        frames = [
+            apply_noise(fr, preset, np.random.default_rng(1000 + k)) for k, fr in enumerate(clean)
+        ]
         for name in names:
             errs, rot, trans, ms = [], [], [], []
             for k, fr in enumerate(frames):
@@ -101,15 +115,28 @@ def main() -> None:
                     trs = {o.instance_id: o.translation for o in est.objects}
                 ms.append(1000 * (time.perf_counter() - t0))
                 errs.append(np.nan if f is None else 100 * abs(f / fr.focal - 1))
-                rot += [rotation_angle_deg(R, truth[i].rotation) for i, R in rots.items() if i in truth]
-                trans += [100 * np.linalg.norm(t - truth[i].translation) / np.linalg.norm(truth[i].translation)
-                          for i, t in trs.items() if i in truth]
+                rot += [
+                    rotation_angle_deg(R, truth[i].rotation) for i, R in rots.items() if i in truth
+                ]
+                trans += [
+                    100
+                    * np.linalg.norm(t - truth[i].translation)
+                    / np.linalg.norm(truth[i].translation)
+                    for i, t in trs.items()
+                    if i in truth
+                ]
             e = np.array(errs)
             ok = np.isfinite(e)
             rot_text = f"{np.median(rot):.1f}°" if rot else "n/a"
             trans_text = f"{np.median(trans):.1f}%" if trans else "n/a"
-            cell = (f"{np.median(e[ok]):.2f} / {np.percentile(e[ok], 90):.2f}, {rot_text}, {trans_text}, "
-                    f"{ok.mean():.0%}, {np.median(ms):.0f} ms") if ok.any() else "-"
+            cell = (
+                (
+                    f"{np.median(e[ok]):.2f} / {np.percentile(e[ok], 90):.2f}, {rot_text}, "
+                    f"{trans_text}, {ok.mean():.0%}, {np.median(ms):.0f} ms"
+                )
+                if ok.any()
+                else "-"
+            )
             results[name].append(cell)
     for name in names:
         print(f"| {name} | " + " | ".join(results[name]) + " |")

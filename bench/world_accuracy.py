@@ -18,9 +18,7 @@ frames until the window stays within 5% of the new focal length, and restarts on
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
@@ -30,9 +28,9 @@ from fcop_ros.core import PAPER_FCOP_IS
 from fcop_ros.core.camera import image_centre
 from fcop_ros.core.stabbing import focal_intervals
 from fcop_ros.synthetic.world import WORLD_PRESETS, ZERO_MEAN_FAMILIES, world_frame, world_frames
+# bench/peers.py: the script's own folder is on the path when run as a script
+from peers import p4pf
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from peers import p4pf  # noqa: E402
 
 
 def plain_reference(fr, rng):
@@ -43,14 +41,26 @@ def plain_reference(fr, rng):
     cx, cy = image_centre(w, h)
     xs, ds, ps, tris, off = [], [], [], [], 0
     for iid in np.unique(fr.mask[fr.mask > 0]):
-        m = ndimage.binary_erosion(fr.mask == iid, iterations=2) & np.isfinite(fr.depth) & (fr.nocs.sum(-1) > 0)
+        m = (
+            ndimage.binary_erosion(fr.mask == iid, iterations=2)
+            & np.isfinite(fr.depth)
+            & (fr.nocs.sum(-1) > 0)
+        )
         if m.sum() < 50:
             continue
         k = np.ones((7, 7))
         cnt = ndimage.convolve(m.astype(float), k, mode="constant")
         d = ndimage.convolve(np.where(m, fr.depth, 0.0), k, mode="constant") / np.maximum(cnt, 1)
-        p = np.stack([ndimage.convolve(np.where(m, fr.nocs[..., c], 0.0), k, mode="constant") for c in range(3)],
-                     -1) / np.maximum(cnt, 1)[..., None]
+        p = (
+            np.stack(
+                [
+                    ndimage.convolve(np.where(m, fr.nocs[..., c], 0.0), k, mode="constant")
+                    for c in range(3)
+                ],
+                -1,
+            )
+            / np.maximum(cnt, 1)[..., None]
+        )
         rr, cc = np.nonzero(m)
         if rr.size > 2000:
             pick = rng.choice(rr.size, 2000, replace=False)
@@ -65,7 +75,8 @@ def plain_reference(fr, rng):
         off += rr.size
     if not tris:
         return None
-    f, _, ok = solve_triplets(np.concatenate(xs), np.concatenate(ds), np.concatenate(ps), np.concatenate(tris))
+    f, _, ok = solve_triplets(np.concatenate(xs), np.concatenate(ds), np.concatenate(ps),
+                              np.concatenate(tris))
     f = f[ok & (f > 50) & (f < 20000)]
     if f.size == 0:
         return None
@@ -77,8 +88,9 @@ def plain_reference(fr, rng):
 def methods(have_colmap):
     out = {
         "fcop_ros": lambda fr, k: estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False),
-        "paper's method taken literally": lambda fr, k: estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k,
-                                                                       **PAPER_FCOP_IS).focal,
+        "paper's method taken literally": lambda fr, k: (
+            estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, **PAPER_FCOP_IS).focal
+        ),
         "plain reference (issue 8)": lambda fr, k: plain_reference(fr, np.random.default_rng(k)),
     }
     if have_colmap:
@@ -107,8 +119,12 @@ def single_frames(presets, frames, first_seed, variant, have_colmap):
                     cover.append(abs(e) <= 2 * out.std_rel)
             err = np.array(err)
             cov = f"{100 * np.mean(cover):.0f}%" if cover else "-"
-            print(f"| {preset} | {name} | {np.median(np.abs(err)):.2f} | {np.percentile(np.abs(err), 90):.2f} | "
-                  f"{np.median(err):+.2f} | {err.size}/{frames} | {cov} | {1000 * t / frames:.0f} |", flush=True)
+            print(
+                f"| {preset} | {name} | {np.median(np.abs(err)):.2f} | "
+                f"{np.percentile(np.abs(err), 90):.2f} | "
+                f"{np.median(err):+.2f} | {err.size}/{frames} | {cov} | {1000 * t / frames:.0f} |",
+                flush=True,
+            )
 
 
 def bias(frames, first_seed, variant):
@@ -129,7 +145,8 @@ def bias(frames, first_seed, variant):
 
 
 def run_sequence(preset, seed, n, variant, zoom=1.0):
-    seq = world_frames(preset, seed, n, variant, zoom_frame=n // 2 if zoom != 1.0 else None, zoom_factor=zoom)
+    seq = world_frames(preset, seed, n, variant, zoom_frame=n // 2 if zoom != 1.0 else None,
+                       zoom_factor=zoom)
     win = FocalWindow(max_frames=30)
     rows = []
     for k, fr in enumerate(seq.frames):
@@ -140,8 +157,11 @@ def run_sequence(preset, seed, n, variant, zoom=1.0):
 
 
 def window(presets, sequences, first_seed, variant):
-    print("\n| preset | single frames: median abs error % | window: median abs error % | ratio | "
-          "window coverage of 2 std_rel | restarts on static | zoom x1.25 / x0.8: frames until within 5% for good |")
+    print(
+        "\n| preset | single frames: median abs error % | window: median abs error % | ratio | "
+        "window coverage of 2 std_rel | restarts on static | zoom x1.25 / x0.8: frames until "
+        "within 5% for good |"
+    )
     print("|---|---|---|---|---|---|---|")
     for preset in presets:
         single, win, cover, restarts, delays = [], [], [], 0, []
@@ -155,19 +175,32 @@ def window(presets, sequences, first_seed, variant):
                     cover.append(abs(np.log(wf / t)) <= 2 * ws)
             for zoom in (1.25, 0.8):
                 rows = run_sequence(preset, first_seed + 100 + q, 40, variant, zoom)[20:]
-                bad = [i for i, r in enumerate(rows) if r[3] is None or abs(np.log(r[3] / r[0])) > 0.05]
+                bad = [
+                    i
+                    for i, r in enumerate(rows)
+                    if r[3] is None or abs(np.log(r[3] / r[0])) > 0.05
+                ]
                 delays.append(bad[-1] + 1 if bad else 0)
         ratio = np.median(win) / np.median(single)
-        print(f"| {preset} | {100 * np.median(single):.2f} | {100 * np.median(win):.2f} | {ratio:.2f} | "
-              f"{100 * np.mean(cover):.0f}% | {restarts} | {sorted(delays)} |", flush=True)
+        print(
+            f"| {preset} | {100 * np.median(single):.2f} | {100 * np.median(win):.2f} | "
+            f"{ratio:.2f} | {100 * np.mean(cover):.0f}% | {restarts} | {sorted(delays)} |",
+            flush=True,
+        )
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    ap.add_argument("--frames", type=int, default=60, help="frames per preset for single-frame figures")
-    ap.add_argument("--sequences", type=int, default=8, help="static (and zoom) sequences per preset")
-    ap.add_argument("--heldout", action="store_true", help="the held-out seeds and error model instead")
-    ap.add_argument("--parts", nargs="+", default=["single", "bias", "window"], choices=["single", "bias", "window"])
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    ap.add_argument(
+        "--frames", type=int, default=60, help="frames per preset for single-frame figures"
+    )
+    ap.add_argument("--sequences", type=int, default=8,
+                    help="static (and zoom) sequences per preset")
+    ap.add_argument("--heldout", action="store_true",
+                    help="the held-out seeds and error model instead")
+    ap.add_argument("--parts", nargs="+", default=["single", "bias", "window"],
+                    choices=["single", "bias", "window"])
     args = ap.parse_args()
     try:
         import pycolmap  # noqa: F401
@@ -175,9 +208,13 @@ def main() -> None:
     except ImportError:
         have_colmap = False
         print("pycolmap is not installed (pip install '.[bench]'): no P4Pf rows\n")
-    variant, frame_seed, seq_seed = ("heldout", 900000, 905000) if args.heldout else ("tuning", 1000, 5000)
-    print(f"{'HELD-OUT' if args.heldout else 'tuning'} set: error model '{variant}', frames from seed {frame_seed}, "
-          f"sequences from seed {seq_seed}\n")
+    variant, frame_seed, seq_seed = (
+        ("heldout", 900000, 905000) if args.heldout else ("tuning", 1000, 5000)
+    )
+    print(
+        f"{'HELD-OUT' if args.heldout else 'tuning'} set: error model '{variant}', frames from "
+        f"seed {frame_seed}, sequences from seed {seq_seed}\n"
+    )
     presets = ["sensor", "predicted"]
     if "single" in args.parts:
         single_frames(presets, args.frames, frame_seed, variant, have_colmap)

@@ -31,7 +31,8 @@ def literal_error(fam, frames: int, first_seed: int = 1000) -> np.ndarray:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     ap.add_argument("--frames", type=int, default=80, help="frames per preset and gain")
     ap.add_argument("--gains", type=float, nargs="+", default=[0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
     ap.add_argument("--presets", nargs="+", default=list(TARGETS))
@@ -41,7 +42,9 @@ def main() -> None:
     for name in args.presets:
         for g in args.gains:
             e = literal_error(BASE_PRESETS[name].scaled(g), args.frames)
-            print(f"| {name} | {g:.2f} | {np.nanmedian(e):.2f} | {TARGETS[name]:.2f} |", flush=True)
+            print(
+                f"| {name} | {g:.2f} | {np.nanmedian(e):.2f} | {TARGETS[name]:.2f} |", flush=True
+            )
 
 
 if __name__ == "__main__":

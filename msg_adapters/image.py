@@ -20,8 +20,9 @@ from sensor_msgs.msg import Image
 # encoding -> (numpy dtype without byte order, channels)
 _LAYOUT = {
     "32FC1": ("f4", 1), "64FC1": ("f8", 1), "16UC1": ("u2", 1),
-    "32FC3": ("f4", 3), "64FC3": ("f8", 3), "rgb8": ("u1", 3), "bgr8": ("u1", 3), "16UC3": ("u2", 3),
-    "mono8": ("u1", 1), "8UC1": ("u1", 1), "mono16": ("u2", 1), "32SC1": ("i4", 1),
+    "32FC3": ("f4", 3), "64FC3": ("f8", 3), "rgb8": ("u1", 3), "bgr8": ("u1", 3),
+    "16UC3": ("u2", 3), "mono8": ("u1", 1), "8UC1": ("u1", 1), "mono16": ("u2", 1),
+    "32SC1": ("i4", 1),
 }
 DEPTH_ENCODINGS = ("32FC1", "64FC1", "16UC1")
 NOCS_ENCODINGS = ("32FC3", "64FC3", "rgb8", "bgr8", "16UC3")
@@ -39,7 +40,9 @@ def image_to_array(msg: Image, supported=None, role: str = "image") -> np.ndarra
     enc = msg.encoding
     allowed = tuple(supported) if supported is not None else tuple(_LAYOUT)
     if enc not in allowed or enc not in _LAYOUT:
-        raise ImageFormatError(f"{role}: unsupported encoding {enc!r}; supported: {', '.join(allowed)}")
+        raise ImageFormatError(
+            f"{role}: unsupported encoding {enc!r}; supported: {', '.join(allowed)}"
+        )
     kind, ch = _LAYOUT[enc]
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     dt = np.dtype(kind).newbyteorder(">" if msg.is_bigendian else "<")
@@ -83,8 +86,9 @@ def nocs_from_image(msg: Image, role: str = "nocs") -> np.ndarray:
 
 
 def mask_from_image(msg: Image, role: str = "mask") -> np.ndarray:
-    """(H,W) integer instance ids in the encoding's own type (uint8, uint16 or int32), 0 = background.
-    Unsigned ids stay unsigned: the estimator then needs no pass to clip negative values."""
+    """(H,W) integer instance ids in the encoding's own type (uint8, uint16 or int32),
+    0 = background. Unsigned ids stay unsigned: the estimator then needs no pass to clip
+    negative values."""
     return image_to_array(msg, MASK_ENCODINGS, role)
 
 
@@ -105,10 +109,14 @@ def array_to_image(arr: np.ndarray, encoding: str, header=None) -> Image:
     return msg
 
 
-def depth_to_image(depth: np.ndarray, encoding: str = "32FC1", header=None, depth_scale: float = 0.001) -> Image:
-    """Depth in metres (NaN invalid) as 32FC1/64FC1, or 16UC1 in ``depth_scale`` units (0 invalid)."""
+def depth_to_image(depth: np.ndarray, encoding: str = "32FC1", header=None,
+                   depth_scale: float = 0.001) -> Image:
+    """Depth in metres (NaN invalid) as 32FC1/64FC1, or 16UC1 in ``depth_scale`` units (0
+    invalid)."""
     if encoding not in DEPTH_ENCODINGS:
-        raise ImageFormatError(f"depth: unsupported encoding {encoding!r}; supported: {', '.join(DEPTH_ENCODINGS)}")
+        raise ImageFormatError(
+            f"depth: unsupported encoding {encoding!r}; supported: {', '.join(DEPTH_ENCODINGS)}"
+        )
     d = np.asarray(depth, dtype=np.float64)
     if encoding == "16UC1":
         units = np.where(np.isfinite(d) & (d > 0), np.round(d / depth_scale), 0)
@@ -119,20 +127,25 @@ def depth_to_image(depth: np.ndarray, encoding: str = "32FC1", header=None, dept
 def nocs_to_image(nocs: np.ndarray, encoding: str = "32FC3", header=None) -> Image:
     """NOCS (H,W,3) in [0,1] as 32FC3/64FC3, rgb8/bgr8 (x255) or 16UC3 (x65535)."""
     if encoding not in NOCS_ENCODINGS:
-        raise ImageFormatError(f"nocs: unsupported encoding {encoding!r}; supported: {', '.join(NOCS_ENCODINGS)}")
+        raise ImageFormatError(
+            f"nocs: unsupported encoding {encoding!r}; supported: {', '.join(NOCS_ENCODINGS)}"
+        )
     p = np.asarray(nocs, dtype=np.float64)
     if encoding in ("rgb8", "bgr8"):
         q = np.clip(np.round(p * 255.0), 0, 255).astype(np.uint8)
         return array_to_image(q[..., ::-1] if encoding == "bgr8" else q, encoding, header)
     if encoding == "16UC3":
-        return array_to_image(np.clip(np.round(p * 65535.0), 0, 65535).astype(np.uint16), encoding, header)
+        return array_to_image(np.clip(np.round(p * 65535.0), 0, 65535).astype(np.uint16),
+                              encoding, header)
     return array_to_image(p, encoding, header)
 
 
 def mask_to_image(mask: np.ndarray, encoding: str = "mono8", header=None) -> Image:
     """Instance ids as mono8/8UC1 (< 256), mono16/16UC1 (< 65536) or 32SC1."""
     if encoding not in MASK_ENCODINGS:
-        raise ImageFormatError(f"mask: unsupported encoding {encoding!r}; supported: {', '.join(MASK_ENCODINGS)}")
+        raise ImageFormatError(
+            f"mask: unsupported encoding {encoding!r}; supported: {', '.join(MASK_ENCODINGS)}"
+        )
     m = np.asarray(mask)
     kind = _LAYOUT[encoding][0]
     info = np.iinfo(np.dtype(kind))

@@ -15,7 +15,8 @@ def stamp_ns(msg) -> int:
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
 
-def camera_info(focal: float, cx: float, cy: float, width: int, height: int, header=None) -> CameraInfo:
+def camera_info(focal: float, cx: float, cy: float, width: int, height: int,
+                header=None) -> CameraInfo:
     """REP-104 CameraInfo of a pinhole camera with fx = fy = focal and no distortion.
 
     K = [f 0 cx; 0 f cy; 0 0 1], R = I, P = [K | 0], ``plumb_bob`` with five zero D, binning 0
@@ -44,7 +45,8 @@ def object_poses(objects) -> list[Pose]:
     for o, (x, y, z, w) in zip(objects, quats):
         p = Pose()
         p.position.x, p.position.y, p.position.z = (float(v) for v in o.translation)
-        p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = float(x), float(y), float(z), float(w)
+        q = p.orientation
+        q.x, q.y, q.z, q.w = float(x), float(y), float(z), float(w)
         out.append(p)
     return out
 

@@ -10,21 +10,21 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from fcop_ros.core.pose import ObjectPose
-from msg_adapters import (DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS, ImageFormatError, camera_info,
-                          depth_from_image, depth_to_image, image_to_array, mask_from_image, mask_to_image,
-                          marker_array, nocs_from_image, nocs_to_image, pose_array)
+from msg_adapters import (DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS, ImageFormatError,
+                          camera_info, depth_from_image, depth_to_image, image_to_array,
+                          mask_from_image, mask_to_image, marker_array, nocs_from_image,
+                          nocs_to_image, pose_array)
 
-rng = np.random.default_rng(0)
 H, W = 7, 11
 
 
-def depth_sample():
+def depth_sample(rng):
     d = rng.uniform(0.3, 5.0, (H, W))
     d[0, 0] = np.nan
     return d
 
 
-def nocs_sample():
+def nocs_sample(rng):
     p = rng.random((H, W, 3))
     p[1, 1] = 0.0
     return p
@@ -45,8 +45,8 @@ def repad(msg: Image, pad: int, bigendian: bool) -> Image:
 
 @pytest.mark.parametrize("encoding", DEPTH_ENCODINGS)
 @pytest.mark.parametrize("pad,big", [(0, False), (5, False), (3, True)])
-def test_depth_round_trip(encoding, pad, big):
-    d = depth_sample()
+def test_depth_round_trip(encoding, pad, big, rng):
+    d = depth_sample(rng)
     msg = repad(depth_to_image(d, encoding), pad, big)
     back = depth_from_image(msg)
     assert back.dtype == np.float32 and back.shape == (H, W) and np.isnan(back[0, 0])
@@ -65,11 +65,12 @@ def test_depth_16uc1_scale_and_zero_invalid():
 
 @pytest.mark.parametrize("encoding", NOCS_ENCODINGS)
 @pytest.mark.parametrize("pad,big", [(0, False), (7, False), (2, True)])
-def test_nocs_round_trip(encoding, pad, big):
-    p = nocs_sample()
+def test_nocs_round_trip(encoding, pad, big, rng):
+    p = nocs_sample(rng)
     msg = repad(nocs_to_image(p, encoding), pad, big)
     back = nocs_from_image(msg)
-    tol = {"rgb8": 0.5 / 255 + 1e-6, "bgr8": 0.5 / 255 + 1e-6, "16UC3": 0.5 / 65535 + 1e-7}.get(encoding, 1e-6)
+    tol = {"rgb8": 0.5 / 255 + 1e-6, "bgr8": 0.5 / 255 + 1e-6,
+           "16UC3": 0.5 / 65535 + 1e-7}.get(encoding, 1e-6)
     np.testing.assert_allclose(back, p, atol=tol)
     assert (back[1, 1] == 0).all()
 
@@ -83,18 +84,23 @@ def test_bgr8_is_channel_reversed_on_the_wire():
 
 @pytest.mark.parametrize("encoding", MASK_ENCODINGS)
 @pytest.mark.parametrize("pad,big", [(0, False), (1, False), (3, True)])
-def test_mask_round_trip(encoding, pad, big):
+def test_mask_round_trip(encoding, pad, big, rng):
     top = 255 if encoding in ("mono8", "8UC1") else 60000
     m = rng.integers(0, top, (H, W))
     back = mask_from_image(repad(mask_to_image(m, encoding), pad, big))
-    assert back.dtype == {"mono8": np.uint8, "8UC1": np.uint8, "32SC1": np.int32}.get(encoding, np.uint16)
+    assert back.dtype == {"mono8": np.uint8, "8UC1": np.uint8, "32SC1": np.int32}.get(
+        encoding, np.uint16
+    )
     np.testing.assert_array_equal(back, m)
 
 
-def test_clear_errors():
-    d = depth_to_image(depth_sample(), "32FC1")
+def test_clear_errors(rng):
+    d = depth_to_image(depth_sample(rng), "32FC1")
     wrong = Image(height=H, width=W, encoding="rgb8", step=W * 3, data=bytes(H * W * 3))
-    with pytest.raises(ImageFormatError, match=r"depth: unsupported encoding 'rgb8'; supported: 32FC1, 64FC1, 16UC1"):
+    with pytest.raises(
+        ImageFormatError,
+        match=r"depth: unsupported encoding 'rgb8'; supported: 32FC1, 64FC1, 16UC1",
+    ):
         depth_from_image(wrong)
     with pytest.raises(ImageFormatError, match="nocs: unsupported encoding '32FC1'"):
         nocs_from_image(d)
@@ -111,11 +117,11 @@ def test_clear_errors():
     with pytest.raises(ImageFormatError, match="do not fit"):
         mask_to_image(np.array([[300]]), "mono8")
     with pytest.raises(ImageFormatError, match="unsupported"):
-        depth_to_image(depth_sample(), "mono8")
+        depth_to_image(depth_sample(rng), "mono8")
 
 
-def test_built_image_survives_serialisation():
-    msg = nocs_to_image(nocs_sample(), "32FC3")
+def test_built_image_survives_serialisation(rng):
+    msg = nocs_to_image(nocs_sample(rng), "32FC3")
     back = deserialize_message(serialize_message(msg), Image)
     np.testing.assert_array_equal(nocs_from_image(back), nocs_from_image(msg))
     assert isinstance(msg.data, array.array) and msg.step == W * 12
@@ -130,7 +136,8 @@ def test_camera_info_rep104():
     assert info.width == 640 and info.height == 480 and info.distortion_model == "plumb_bob"
     np.testing.assert_array_equal(info.k, [612.5, 0, 319.5, 0, 612.5, 239.5, 0, 0, 1])
     np.testing.assert_array_equal(info.r, np.eye(3).ravel())
-    np.testing.assert_array_equal(np.reshape(info.p, (3, 4)), np.column_stack([np.reshape(info.k, (3, 3)), np.zeros(3)]))
+    np.testing.assert_array_equal(np.reshape(info.p, (3, 4)),
+                                  np.column_stack([np.reshape(info.k, (3, 3)), np.zeros(3)]))
     assert list(info.d) == [0.0] * 5 and info.binning_x == info.binning_y == 0
     assert (info.roi.x_offset, info.roi.y_offset, info.roi.width, info.roi.height) == (0, 0, 0, 0)
     deserialize_message(serialize_message(info), CameraInfo)

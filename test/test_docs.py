@@ -1,4 +1,6 @@
-"""The README and config/fcop.yaml describe the node as it is: every parameter, with its default."""
+"""The README and config/fcop.yaml describe the node as it is: every parameter, with its
+default."""
+
 import os
 import re
 
@@ -23,5 +25,11 @@ def test_readme_parameter_table_lists_every_parameter_with_its_default():
     for name, (default, _, _) in PARAMETERS.items():
         assert name in rows, name
         shown = rows[name].strip()
-        expected = str(default).lower() if isinstance(default, bool) else str(default) if default != "" else '""'
+        expected = (
+            str(default).lower()
+            if isinstance(default, bool)
+            else str(default)
+            if default != ""
+            else '""'
+        )
         assert shown == expected, (name, shown, expected)

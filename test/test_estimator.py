@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from conftest import BAD_CASES, clean_frame, corrupted, noisy_frame
 from fcop_ros import FocalEstimate, estimate_focal
 from fcop_ros.core.pose import rotation_angle_deg
+from fcop_ros.synthetic.scenes import BAD_CASES, clean_frame, corrupted, noisy_frame
 
 
 def _match(est, frame):
@@ -67,8 +67,8 @@ def test_ransac_variant_is_selectable():
 def test_literal_paper_method_on_clean_frame():
     """Absolute 5 px bound, no refinement, no denoising: the paper's fCOP-IS."""
     fr = clean_frame(0)
-    est = estimate_focal(fr.depth, fr.nocs, fr.mask, bound_mode="absolute", noise_bound=5.0, refine=False,
-                         denoise_radius=0, erode_px=0, outlier_sigma=0, seed=0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, bound_mode="absolute", noise_bound=5.0,
+                         refine=False, denoise_radius=0, erode_px=0, outlier_sigma=0, seed=0)
     assert abs(est.focal / fr.focal - 1) < 0.01 and est.interval[0] <= est.focal <= est.interval[1]
 
 
@@ -80,19 +80,26 @@ def _errors(preset, seeds, **opt):
         focal.append(np.nan if est.focal is None else 100 * abs(est.focal / fr.focal - 1))
         for got, true in _match(est, fr):
             rot.append(rotation_angle_deg(got.rotation, true.rotation))
-            trans.append(100 * np.linalg.norm(got.translation - true.translation) / np.linalg.norm(true.translation))
+            trans.append(
+                100
+                * np.linalg.norm(got.translation - true.translation)
+                / np.linalg.norm(true.translation)
+            )
     return np.array(focal), np.array(rot), np.array(trans)
 
 
 # Measured on 40 seeded frames (seeds 0..39) with the default options, commit of this test:
 # preset: (median focal %, p90 focal %, median rotation deg, median translation % of distance).
 # Bounds below are these numbers plus a margin of ~25%. These old presets were what the
-# previous estimator was tuned on (0.53 / 1.05 / 2.97% there); the per-object fit with a depth
-# tilt trades a little here for far less bias on the randomised world (test_world_accuracy.py).
+# previous estimator was tuned on; the per-object fit with a depth tilt trades a little here for
+# far less bias on the randomised world (test_world_accuracy.py). Re-measured when the presets
+# became fixed settings of the world's error mechanisms (other random draws, a smooth depth
+# field normalised to its nominal amplitude); before: mild (0.40, 1.42, 0.22, 5.7), moderate
+# (1.05, 2.61, 0.48, 11.4), harsh (4.72, 12.15, 1.76, 22.3).
 MEASURED = {
-    "mild": (0.40, 1.42, 0.22, 5.7),
-    "moderate": (1.05, 2.61, 0.48, 11.4),
-    "harsh": (4.72, 12.15, 1.76, 22.3),
+    "mild": (0.62, 1.71, 0.24, 3.0),
+    "moderate": (1.21, 4.64, 0.54, 6.2),
+    "harsh": (4.61, 9.88, 1.74, 12.8),
 }
 
 

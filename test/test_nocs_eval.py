@@ -33,7 +33,8 @@ def dataset(tmp_path_factory):
     for s in range(2):
         for k, fr in enumerate(scene_frames(s)):
             prefix = root / f"scene_{s + 1}" / f"{k:04d}"
-            ne.write_frame(prefix, fr.depth, fr.nocs, fr.mask, {o.instance_id: 1 + o.instance_id % 6 for o in fr.objects})
+            ne.write_frame(prefix, fr.depth, fr.nocs, fr.mask,
+                           {o.instance_id: 1 + o.instance_id % 6 for o in fr.objects})
             truth[prefix] = fr
     return root, truth
 
@@ -51,7 +52,8 @@ def test_loader_matches_the_nocs_conventions(dataset):
     root, truth = dataset
     prefix, fr = next(iter(truth.items()))
     depth, nocs, mask = ne.load_frame(prefix, root)
-    np.testing.assert_array_equal(nocs[mask > 0], reference_coord(str(prefix) + "_coord.png")[mask > 0])
+    np.testing.assert_array_equal(nocs[mask > 0],
+                                  reference_coord(str(prefix) + "_coord.png")[mask > 0])
     raw_mask = cv2.imread(str(prefix) + "_mask.png")[:, :, 2]
     assert (raw_mask[fr.mask == 0] == 255).all()
     np.testing.assert_array_equal(mask, fr.mask.astype(np.int32))
@@ -90,10 +92,12 @@ def test_cli_per_scene_medians_and_csv(dataset, tmp_path, capsys):
     f_true = 0.5 * (FX + FY)
     for r in rows:
         assert float(r["focal_true"]) == pytest.approx(f_true)
-        assert abs(float(r["error_pct"])) < 0.9  # truth (fx+fy)/2 differs from the rendered fx by 0.07%
+        # truth (fx+fy)/2 differs from the rendered fx by 0.07%
+        assert abs(float(r["error_pct"])) < 0.9
     assert ne.main([str(tmp_path / "nope"), "--intrinsics", "real275"]) == 2
     assert ne.main([str(root), "--intrinsics", "1,2,3"]) == 2
-    assert ne.main([str(root), "--intrinsics", "camera25", "--depth", str(tmp_path / "missing")]) == 2
+    assert ne.main([str(root), "--intrinsics", "camera25", "--depth",
+                    str(tmp_path / "missing")]) == 2
     capsys.readouterr()
 
 
@@ -103,7 +107,8 @@ def test_predicted_depth_and_nocs_directories(dataset, tmp_path):
     for prefix, fr in truth.items():
         rel = prefix.relative_to(root)
         (pred_d / rel).parent.mkdir(parents=True, exist_ok=True)
-        np.save(str(pred_d / rel) + "_depth.npy", (1.25 * fr.depth).astype(np.float32))  # a global scale error
+        # a global scale error
+        np.save(str(pred_d / rel) + "_depth.npy", (1.25 * fr.depth).astype(np.float32))
         ne.write_frame(pred_n / rel, fr.depth, fr.nocs, fr.mask, {1: 1})
     rows, summary = ne.evaluate(root, ne.INTRINSICS["real275"], pred_d, pred_n)
     assert summary["all"][1] == 6 and summary["all"][0] < 1.0  # the scale error cancels
@@ -123,6 +128,7 @@ def test_camera25_depth_encoding(tmp_path):
 def test_cli_unwritable_csv_is_one_line_and_exit_2(dataset, tmp_path, capsys):
     root, _ = dataset
     (tmp_path / "file").write_text("")
-    assert ne.main([str(root), "--intrinsics", "real275", "--csv", str(tmp_path / "file" / "eval.csv")]) == 2
+    assert ne.main([str(root), "--intrinsics", "real275", "--csv",
+                    str(tmp_path / "file" / "eval.csv")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("fcop_eval_nocs: ") and "Not a directory" in err and "\n" not in err

@@ -16,9 +16,9 @@ from sensor_msgs.msg import CameraInfo
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
-from conftest import clean_frame, noisy_frame
 from fcop_ros.node import to_fcop_convention
-from ros_helpers import Recorder, frame_messages, harness, ros_context, rotation_errors, spin_until, stamp_ns  # noqa
+from fcop_ros.synthetic.scenes import camera_frame as cam, noisy_frame
+from ros_helpers import Recorder, frame_messages, ros_context, rotation_errors, spin_until
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config", "fcop.yaml")
@@ -26,9 +26,6 @@ BIN = os.path.dirname(sys.executable)
 T0 = 1_700_000_000_000_000_000
 DT = 33_333_333
 
-
-def cam(k, focal=600.0):
-    return clean_frame(k, 640, 480, focal)
 
 
 def shipped_with(tmp_path, **changes):
@@ -47,10 +44,15 @@ def shipped_with(tmp_path, **changes):
 
 def test_shipped_params_file_applies_under_a_namespace_and_another_name(harness, tmp_path):
     params = shipped_with(tmp_path, window_frames=7, sync_mode="approximate")
-    h = harness(node_args=["--ros-args", "-r", "__ns:=/camera", "-r", "__node:=focal", "--params-file", params],
+    h = harness(node_args=["--ros-args", "-r", "__ns:=/camera", "-r", "__node:=focal",
+                           "--params-file", params],
                 inputs=("/camera/depth", "/camera/nocs", "/camera/mask"))
     assert h.node.get_fully_qualified_name() == "/camera/focal"
-    assert h.node.p["window_frames"] == 7 and h.node.window.max_frames == 7 and h.node.sync.slop_ns == 10_000_000
+    assert (
+        h.node.p["window_frames"] == 7
+        and h.node.window.max_frames == 7
+        and h.node.sync.slop_ns == 10_000_000
+    )
     # Outputs beside the inputs.
     assert h.node.pub_info.topic_name == "/camera/camera_info"
     assert h.node.sub_info_in.topic_name == "/camera/camera_info_in"
@@ -63,7 +65,8 @@ def test_shipped_params_file_applies_to_the_installed_node_under_a_namespace(tmp
     exe = os.path.join(BIN, "fcop_node")
     params = shipped_with(tmp_path, window_frames=45, camera_name="left")
     err = open(tmp_path / "node.err", "w")
-    proc = subprocess.Popen([exe, "--ros-args", "-r", "__ns:=/cam", "-r", "__node:=fcop_ns", "--params-file", params],
+    proc = subprocess.Popen([exe, "--ros-args", "-r", "__ns:=/cam", "-r", "__node:=fcop_ns",
+                             "--params-file", params],
                             stdout=subprocess.DEVNULL, stderr=err)
     try:
         with ros_context() as (ctx, ex):
@@ -71,10 +74,13 @@ def test_shipped_params_file_applies_to_the_installed_node_under_a_namespace(tmp
             ex.add_node(tester)
             client = tester.create_client(GetParameters, "/cam/fcop_ns/get_parameters")
             assert spin_until(ex, client.service_is_ready, 60), (tmp_path / "node.err").read_text()
-            fut = client.call_async(GetParameters.Request(names=["window_frames", "camera_name", "queue_size"]))
+            fut = client.call_async(
+                GetParameters.Request(names=["window_frames", "camera_name", "queue_size"])
+            )
             assert spin_until(ex, fut.done, 20)
             got = fut.result().values
-            assert [got[0].integer_value, got[1].string_value, got[2].integer_value] == [45, "left", 5]
+            assert [got[0].integer_value, got[1].string_value,
+                    got[2].integer_value] == [45, "left", 5]
             tester.destroy_node()
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=20) == 0
@@ -93,7 +99,8 @@ def driver_info(width=640, height=480, d=(0.1, -0.05, 0.001, 0.002, 0.0), cx=330
     msg.width, msg.height = width, height
     msg.distortion_model = "plumb_bob"
     msg.d = list(d)
-    msg.k = [500.0, 0.0, cx, 0.0, 500.0, cy, 0.0, 0.0, 1.0]  # the driver's focal is wrong: replaced
+    # the driver's focal is wrong: replaced
+    msg.k = [500.0, 0.0, cx, 0.0, 500.0, cy, 0.0, 0.0, 1.0]
     c, s = np.cos(0.01), np.sin(0.01)
     msg.r = [c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0]
     msg.p = [500.0, 0.0, cx, 0.0, 0.0, 500.0, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
@@ -160,7 +167,8 @@ def test_save_calibration_writes_what_camera_info_manager_loads(harness, tmp_pat
     received = []
     h = harness(parameter_overrides=[Parameter("calibration_file", value=str(path)),
                                      Parameter("camera_name", value="left"),
-                                     Parameter("set_camera_info_service", value="/driver/set_camera_info")])
+                                     Parameter("set_camera_info_service",
+                                               value="/driver/set_camera_info")])
 
     def on_set(request, response):
         received.append(request.camera_info)
@@ -177,20 +185,29 @@ def test_save_calibration_writes_what_camera_info_manager_loads(harness, tmp_pat
     assert spin_until(h.ex, lambda: len(received) == 1, 10)
     focal = h.node.window.current.focal
     cal = yaml.safe_load(path.read_text())
-    assert cal["image_width"] == 640 and cal["image_height"] == 480 and cal["camera_name"] == "left"
-    assert cal["camera_matrix"] == {"rows": 3, "cols": 3,
-                                    "data": pytest.approx([focal, 0, 330.25, 0, focal, 228.75, 0, 0, 1], rel=1e-12)}
+    assert (
+        cal["image_width"] == 640 and cal["image_height"] == 480 and cal["camera_name"] == "left"
+    )
+    assert cal["camera_matrix"] == {
+        "rows": 3,
+        "cols": 3,
+        "data": pytest.approx([focal, 0, 330.25, 0, focal, 228.75, 0, 0, 1], rel=1e-12),
+    }
     assert cal["distortion_model"] == "plumb_bob"
     assert cal["distortion_coefficients"] == {"rows": 1, "cols": 5, "data": [0.0] * 5}
     assert cal["rectification_matrix"]["rows"] == 3 and cal["rectification_matrix"]["cols"] == 3
     assert cal["rectification_matrix"]["data"] == pytest.approx(list(driver_info().r), rel=1e-12)
     assert cal["projection_matrix"] == {"rows": 3, "cols": 4, "data": pytest.approx(
         [focal, 0, 330.25, 0, 0, focal, 228.75, 0, 0, 0, 1, 0], rel=1e-12)}
-    assert set(cal) == {"image_width", "image_height", "camera_name", "camera_matrix", "distortion_model",
-                        "distortion_coefficients", "rectification_matrix", "projection_matrix"}
+    assert set(cal) == {"image_width", "image_height", "camera_name", "camera_matrix",
+                        "distortion_model", "distortion_coefficients", "rectification_matrix",
+                        "projection_matrix"}
     # The SetCameraInfo request carries the same calibration.
     sent = received[0]
-    assert list(sent.k) == pytest.approx(cal["camera_matrix"]["data"]) and (sent.width, sent.height) == (640, 480)
+    assert list(sent.k) == pytest.approx(cal["camera_matrix"]["data"]) and (
+        sent.width,
+        sent.height,
+    ) == (640, 480)
 
 
 def test_save_calibration_refuses_an_uncertain_estimate(harness, tmp_path):
@@ -245,9 +262,14 @@ def test_output_qos_is_what_the_readme_says(harness):
     h = harness()
     text = open(os.path.join(ROOT, "README.md")).read()
     assert "outputs reliable, volatile, keep last 10" in text
-    assert "`~/latest_camera_info` | sensor_msgs/CameraInfo | out | reliable, transient local, depth 1" in text
+    assert (
+        "`~/latest_camera_info` | sensor_msgs/CameraInfo | out | reliable, transient local, depth "
+        "1"
+        in text
+    )
     for topic in ("/camera_info", "/object_poses", "/object_markers"):
-        (info,) = h.tester.get_publishers_info_by_topic(topic)  # as the graph (another node) sees it
+        # as the graph (another node) sees it
+        (info,) = h.tester.get_publishers_info_by_topic(topic)
         assert (info.qos_profile.reliability, info.qos_profile.durability) == (
             ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE), topic
     for pub in (h.node.pub_info, h.node.pub_poses, h.node.pub_markers):

@@ -8,27 +8,23 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 # module imported -> (rosdep key or ROS package in package.xml, PyPI requirement in setup.py:
 # a plain name in install_requires, or 'ros:<name>' for the ROS wheels of both extras)
-DEPENDENCIES = {
-    "rclpy": ("rclpy", "ros:rclpy[fastrtps]"),
-    "rcl_interfaces": ("rcl_interfaces", "ros:rcl-interfaces"),
-    "ament_index_python": ("ament_index_python", "ros:ament-index-python"),
-    "sensor_msgs": ("sensor_msgs", "ros:sensor-msgs"),
-    "std_msgs": ("std_msgs", "ros:std-msgs"),
-    "geometry_msgs": ("geometry_msgs", "ros:geometry-msgs"),
-    "visualization_msgs": ("visualization_msgs", "ros:visualization-msgs"),
-    "diagnostic_msgs": ("diagnostic_msgs", "ros:diagnostic-msgs"),
-    "std_srvs": ("std_srvs", "ros:std-srvs"),
-    "builtin_interfaces": ("builtin_interfaces", "ros:builtin-interfaces"),
-    "rosgraph_msgs": ("rosgraph_msgs", "ros:rosgraph-msgs"),
-    "numpy": ("python3-numpy", "numpy"),
-    "scipy": ("python3-scipy", "scipy"),
-    "cv2": ("python3-opencv", "opencv-python-headless"),
-    "matplotlib": ("python3-matplotlib", "matplotlib"),
-    "tqdm": ("python3-tqdm", "tqdm"),
-    "yaml": ("python3-yaml", "pyyaml"),
-    "rosbags": ("python3-rosbags-pip", "rosbags>=0.10"),
-    "mcap": ("mcap-ros2-support", "mcap"),
-}
+DEPENDENCIES = {"rclpy": ("rclpy", "ros:rclpy[fastrtps]"),
+                "rcl_interfaces": ("rcl_interfaces", "ros:rcl-interfaces"),
+                "ament_index_python": ("ament_index_python", "ros:ament-index-python"),
+                "sensor_msgs": ("sensor_msgs", "ros:sensor-msgs"),
+                "std_msgs": ("std_msgs", "ros:std-msgs"),
+                "geometry_msgs": ("geometry_msgs", "ros:geometry-msgs"),
+                "visualization_msgs": ("visualization_msgs", "ros:visualization-msgs"),
+                "diagnostic_msgs": ("diagnostic_msgs", "ros:diagnostic-msgs"),
+                "std_srvs": ("std_srvs", "ros:std-srvs"),
+                "builtin_interfaces": ("builtin_interfaces", "ros:builtin-interfaces"),
+                "rosgraph_msgs": ("rosgraph_msgs", "ros:rosgraph-msgs"),
+                "numpy": ("python3-numpy", "numpy"), "scipy": ("python3-scipy", "scipy"),
+                "cv2": ("python3-opencv", "opencv-python-headless"),
+                "matplotlib": ("python3-matplotlib", "matplotlib"),
+                "tqdm": ("python3-tqdm", "tqdm"), "yaml": ("python3-yaml", "pyyaml"),
+                "rosbags": ("python3-rosbags-pip", "rosbags>=0.10"),
+                "mcap": ("mcap-ros2-support", "mcap")}
 OWN = {"fcop_ros", "msg_adapters"}
 
 
@@ -64,12 +60,16 @@ def setup_requirements():
 
 def test_every_import_is_declared():
     root = ET.parse(ROOT / "package.xml").getroot()
-    exec_deps = {e.text for e in root.findall("exec_depend")} | {e.text for e in root.findall("depend")}
+    exec_deps = {e.text for e in root.findall("exec_depend")} | {
+        e.text for e in root.findall("depend")
+    }
     ros, install = setup_requirements()
     for module, where in sorted(imported_modules().items()):
         assert module in DEPENDENCIES, f"{module} (imported in {where}) has no known rosdep key"
         key, req = DEPENDENCIES[module]
-        assert key in exec_deps, f"package.xml lacks <exec_depend>{key}</exec_depend> for {module} ({where})"
+        assert key in exec_deps, (
+            f"package.xml lacks <exec_depend>{key}</exec_depend> for {module} ({where})"
+        )
         if req.startswith("ros:"):
             assert req[4:] in ros, f"setup.py's _ROS_PACKAGES lacks {req[4:]} for {module}"
         else:

@@ -1,9 +1,8 @@
 """Umeyama similarity and the pose convention."""
 import numpy as np
-import pytest
 from scipy.spatial.transform import Rotation
 
-from fcop_ros.core.pose import back_project, rotation_angle_deg, umeyama
+from fcop_ros.core.pose import back_project, umeyama
 from fcop_ros.synthetic import simulate_points
 
 

@@ -8,7 +8,6 @@ import sys
 import time
 
 import numpy as np
-import pytest
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
@@ -24,7 +23,9 @@ BIN = os.path.dirname(sys.executable)
 def _start(cmd, tmp_path, name, env=None):
     out = open(tmp_path / f"{name}.out", "w")
     err = open(tmp_path / f"{name}.err", "w")
-    return subprocess.Popen(cmd, stdout=out, stderr=err, env=env or os.environ.copy()), tmp_path / f"{name}.err"
+    return subprocess.Popen(
+        cmd, stdout=out, stderr=err, env=env or os.environ.copy()
+    ), tmp_path / f"{name}.err"
 
 
 def _interrupt(proc, timeout=20.0) -> int:
@@ -39,25 +40,34 @@ def _interrupt(proc, timeout=20.0) -> int:
 
 def test_installed_node_across_processes_answers_640x480(tmp_path):
     exe = os.path.join(BIN, "fcop_node")
-    assert os.access(exe, os.X_OK), "the fcop_node console script is not installed in this environment"
+    assert os.access(exe, os.X_OK), (
+        "the fcop_node console script is not installed in this environment"
+    )
     # The child must read the shipped large-image profile (conftest sets it unless the caller
     # named one): the variable its Fast DDS reads names a file with the same content.
     for var in profile_env_vars():
         assert os.path.isfile(os.environ[var]), (var, os.environ[var])
         with open(os.environ[var]) as fh, open(large_image_profile()) as shipped:
-            assert fh.read() == shipped.read(), f"{var} does not name config/fastdds_large_images.xml"
-    proc, err = _start([exe, "--ros-args", "-p", "seed:=1", "-r", "__node:=fcop_xproc"], tmp_path, "node")
+            assert fh.read() == shipped.read(), (
+                f"{var} does not name config/fastdds_large_images.xml"
+            )
+    proc, err = _start([exe, "--ros-args", "-p", "seed:=1", "-r", "__node:=fcop_xproc"],
+                       tmp_path, "node")
     try:
         with ros_context() as (ctx, ex):
             tester = Node("xproc_tester", context=ctx)
-            pubs = [tester.create_publisher(Image, t, qos_profile_sensor_data) for t in ("depth", "nocs", "mask")]
+            pubs = [
+                tester.create_publisher(Image, t, qos_profile_sensor_data)
+                for t in ("depth", "nocs", "mask")
+            ]
             rec = Recorder(tester, CameraInfo, "camera_info")
             ex.add_node(tester)
             assert spin_until(ex, lambda: all(p.get_subscription_count() for p in pubs)
                               and rec.sub.get_publisher_count() > 0, 60), err.read_text()
             sent, resent = [], 0
             for k in range(8):
-                fr = apply_noise(render_scene(np.random.default_rng(k), 5, 600.0), "mild", np.random.default_rng(k))
+                fr = apply_noise(render_scene(np.random.default_rng(k), 5, 600.0), "mild",
+                                 np.random.default_rng(k))
                 stamp = 1_000_000_000 * (100 + k)
                 msgs = frame_messages(fr, stamp)
                 sent.append(stamp)
@@ -85,10 +95,13 @@ def test_installed_node_across_processes_answers_640x480(tmp_path):
 
 def test_colcon_build_gives_the_ros2_run_layout(tmp_path):
     colcon = os.path.join(BIN, "colcon")
-    assert os.access(colcon, os.X_OK), "colcon (colcon-common-extensions) is not installed in this environment"
+    assert os.access(colcon, os.X_OK), (
+        "colcon (colcon-common-extensions) is not installed in this environment"
+    )
     src = tmp_path / "ws" / "src" / "fcop_ros"
     src.mkdir(parents=True)
-    for name in ("setup.py", "setup.cfg", "package.xml", "resource", "config", "launch", "fcop_ros", "msg_adapters"):
+    for name in ("setup.py", "setup.cfg", "package.xml", "resource", "config", "launch",
+                 "fcop_ros", "msg_adapters"):
         path = os.path.join(ROOT, name)
         (shutil.copytree if os.path.isdir(path) else shutil.copy)(path, src / name)
     ws = tmp_path / "ws"
@@ -99,7 +112,9 @@ def test_colcon_build_gives_the_ros2_run_layout(tmp_path):
     assert os.access(exe, os.X_OK)
     assert (prefix / "share" / "fcop_ros" / "config" / "fcop.yaml").is_file()
     assert (prefix / "share" / "fcop_ros" / "package.xml").is_file()
-    assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "fcop_ros").is_file()
+    assert (
+        prefix / "share" / "ament_index" / "resource_index" / "packages" / "fcop_ros"
+    ).is_file()
     # The launch file is installed, and what it names exists in the install tree (`launch` is
     # not on PyPI: it runs here against stand-ins that record what it builds).
     launch_file = prefix / "share" / "fcop_ros" / "launch" / "fcop.launch.py"
@@ -108,24 +123,34 @@ def test_colcon_build_gives_the_ros2_run_layout(tmp_path):
     node = description.entities[-1]
     assert node.kind == "Node"
     assert os.access(prefix / "lib" / node.kw["package"] / node.kw["executable"], os.X_OK)
-    args = {a.args[0]: a.kw["default_value"] for a in description.entities if a.kind == "DeclareLaunchArgument"}
+    args = {
+        a.args[0]: a.kw["default_value"]
+        for a in description.entities
+        if a.kind == "DeclareLaunchArgument"
+    }
     assert args["params_file"] == str(prefix / "share" / "fcop_ros" / "config" / "fcop.yaml")
     assert args["namespace"] == "/camera"
     assert [p.name for p in node.kw["parameters"]] == ["params_file"]
     assert node.kw["namespace"].name == "namespace" and node.kw["name"].name == "node_name"
-    # Every remap argument names a topic the node really has (relative, so it follows the namespace).
+    # Every remap argument names a topic the node really has (relative, so it follows the
+    # namespace).
     topics = {"depth", "nocs", "mask", "camera_info_in", "camera_info"}
-    assert {src for src, _ in node.kw["remappings"]} == topics and all(args[t] == t for t in topics)
+    assert {src for src, _ in node.kw["remappings"]} == topics and all(
+        args[t] == t for t in topics
+    )
     # What `ros2 run fcop_ros fcop_node` does, after `source install/setup.bash`: find the
     # package in the ament index of AMENT_PREFIX_PATH, run <prefix>/lib/fcop_ros/fcop_node.
-    script = ("source install/setup.bash && "
-              f"prefix=$({sys.executable} -c 'from ament_index_python.packages import get_package_prefix as g; "
-              "print(g(\"fcop_ros\"))') && "
-              f"{sys.executable} -c 'from fcop_ros.config import config_path; print(config_path())' && "
-              "exec $prefix/lib/fcop_ros/fcop_node --ros-args -r __node:=fcop_colcon "
-              "--params-file $prefix/share/fcop_ros/config/fcop.yaml")
-    proc = subprocess.Popen(["bash", "-c", script], cwd=ws, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    script = (
+        "source install/setup.bash && "
+        f"prefix=$({sys.executable} -c 'from ament_index_python.packages import "
+        "get_package_prefix as g; "
+        'print(g("fcop_ros"))\') && '
+        f"{sys.executable} -c 'from fcop_ros.config import config_path; print(config_path())' && "
+        "exec $prefix/lib/fcop_ros/fcop_node --ros-args -r __node:=fcop_colcon "
+        "--params-file $prefix/share/fcop_ros/config/fcop.yaml"
+    )
+    proc = subprocess.Popen(["bash", "-c", script], cwd=ws, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 30
         ready = False
@@ -162,7 +187,8 @@ def run_launch_file(path, prefix):
     import importlib.util
     import types
     stubs = {}
-    for module, names in (("launch", ["LaunchDescription"]), ("launch.actions", ["DeclareLaunchArgument"]),
+    for module, names in (("launch", ["LaunchDescription"]),
+                          ("launch.actions", ["DeclareLaunchArgument"]),
                           ("launch.substitutions", ["LaunchConfiguration"]), ("launch_ros", []),
                           ("launch_ros.actions", ["Node"])):
         mod = types.ModuleType(module)

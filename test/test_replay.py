@@ -23,7 +23,8 @@ START = 1_700_000_000_000_000_000
 
 
 def tiny_bag(path, frames=6, storage="mcap", preset="mild", rate=30.0, zoom=None, **enc):
-    spec = SequenceSpec(frames, W, H, F, zoom[0] if zoom else None, zoom[1] if zoom else None, preset, 4)
+    spec = SequenceSpec(frames, W, H, F, zoom[0] if zoom else None,
+                        zoom[1] if zoom else None, preset, 4)
     mb.make_bag(path, spec, rate=rate, seed=3, storage=storage, **enc)
     return path
 
@@ -48,7 +49,8 @@ def read_bag(path):
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_replay_outputs(tmp_path, storage):
-    bag = tiny_bag(tmp_path / "in", storage=storage, compression="zstd")  # as fcop_make_bag writes it
+    # as fcop_make_bag writes it
+    bag = tiny_bag(tmp_path / "in", storage=storage, compression="zstd")
     s = run(bag, tmp_path / "out", out_storage=storage)
     stamps = [START + k * int(round(1e9 / 30)) for k in range(6)]
     assert s.frames_read == 6 and s.frames_estimated == 6 and not s.damaged
@@ -57,9 +59,11 @@ def test_replay_outputs(tmp_path, storage):
     assert [int(r["stamp_ns"]) for r in rows] == stamps
     for r in rows:
         # 160x120 frames carry little evidence: the truth within the reported +-3 std_rel.
-        assert float(r["focal_true"]) == F and abs(float(r["focal_error_pct"])) <= 300 * float(r["std_rel"])
+        assert float(r["focal_true"]) == F and abs(float(r["focal_error_pct"])) <= 300 * float(
+            r["std_rel"]
+        )
         assert float(r["cx"]) == (W - 1) / 2 and int(r["objects"]) >= 1
-    # std_rel is the window's relative standard error, below 5% here (measured 0.6-1.4%). It need
+    # std_rel is the window's relative standard error, below 5% here (measured 0.7-1.6%). It need
     # not shrink as the window fills: frames that agree closely reveal error they all share.
     std = [float(r["std_rel"]) for r in rows]
     assert all(0 < v < 0.05 for v in std)
@@ -68,11 +72,16 @@ def test_replay_outputs(tmp_path, storage):
     assert topics == {"/fcop/camera_info": "sensor_msgs/msg/CameraInfo",
                       "/fcop/object_poses": "geometry_msgs/msg/PoseArray",
                       "/fcop/object_markers": "visualization_msgs/msg/MarkerArray"}
-    infos = [(ts, deserialize_message(raw, CameraInfo)) for t, ts, raw in msgs if t == "/fcop/camera_info"]
+    infos = [
+        (ts, deserialize_message(raw, CameraInfo))
+        for t, ts, raw in msgs
+        if t == "/fcop/camera_info"
+    ]
     assert [ts for ts, _ in infos] == stamps and [stamp_ns(i) for _, i in infos] == stamps
     for _, info in infos:
         f = info.k[0]
-        assert info.k[4] == f and list(info.p) == [f, 0, info.k[2], 0, 0, f, info.k[5], 0, 0, 0, 1, 0]
+        assert info.k[4] == f and list(info.p) == [f, 0, info.k[2], 0, 0, f, info.k[5], 0, 0, 0, 1,
+                                                   0]
         assert info.distortion_model == "plumb_bob" and (info.width, info.height) == (W, H)
     assert sorted(ts for t, ts, _ in msgs if t == "/fcop/object_poses") == stamps
     png = (tmp_path / "out" / "report.png").read_bytes()
@@ -84,8 +93,8 @@ def test_replay_outputs(tmp_path, storage):
 @pytest.mark.parametrize("nocs_encoding", ["32FC3", "rgb8"])
 @pytest.mark.parametrize("mask_encoding", ["mono8", "16UC1"])
 def test_every_encoding(tmp_path, depth_encoding, nocs_encoding, mask_encoding):
-    bag = tiny_bag(tmp_path / "in", frames=3, depth_encoding=depth_encoding, nocs_encoding=nocs_encoding,
-                   mask_encoding=mask_encoding)
+    bag = tiny_bag(tmp_path / "in", frames=3, depth_encoding=depth_encoding,
+                   nocs_encoding=nocs_encoding, mask_encoding=mask_encoding)
     src = BagSource(bag)
     encs = {t: deserialize_message(raw, Image).encoding for t, _, raw in src.messages(
         [mb.TOPICS["depth"], mb.TOPICS["nocs"], mb.TOPICS["mask"]])}
@@ -108,19 +117,28 @@ def test_zoom_reconverges_in_the_csv(tmp_path):
 
 def test_cli_errors(tmp_path, capsys):
     bag = tiny_bag(tmp_path / "in", frames=2)
-    base = ["--nocs-topic", mb.TOPICS["nocs"], "--mask-topic", mb.TOPICS["mask"], "--out", str(tmp_path / "o")]
+    base = ["--nocs-topic", mb.TOPICS["nocs"], "--mask-topic", mb.TOPICS["mask"], "--out",
+            str(tmp_path / "o")]
     assert rp.main([str(tmp_path / "missing"), "--depth-topic", "/x"] + base) == 2
     assert "bag not found" in capsys.readouterr().err
     assert rp.main([str(bag), "--depth-topic", "/camera/dpth"] + base) == 2
     err = capsys.readouterr().err
-    assert "'/camera/dpth' is not in the bag; it has:" in err and "/camera/depth (sensor_msgs/msg/Image, 2 msgs)" in err
+    assert (
+        "'/camera/dpth' is not in the bag; it has:" in err
+        and "/camera/depth (sensor_msgs/msg/Image, 2 msgs)" in err
+    )
     assert rp.main([str(bag), "--depth-topic", mb.TOPICS["truth"]] + base) == 2
-    assert "has type sensor_msgs/msg/CameraInfo, expected sensor_msgs/msg/Image" in capsys.readouterr().err
-    assert rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--truth-topic", mb.TOPICS["poses"]] + base) == 2
+    assert (
+        "has type sensor_msgs/msg/CameraInfo, expected sensor_msgs/msg/Image"
+        in capsys.readouterr().err
+    )
+    assert rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--truth-topic",
+                    mb.TOPICS["poses"]] + base) == 2
     assert "expected sensor_msgs/msg/CameraInfo" in capsys.readouterr().err
     assert rp.main([str(bag / "metadata.yaml"), "--depth-topic", "/x"] + base) == 2
     assert "give the bag directory" in capsys.readouterr().err
-    assert rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "-p", "window_frames=3"] + base) == 2
+    assert rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "-p",
+                    "window_frames=3"] + base) == 2
     assert "NAME:=VALUE" in capsys.readouterr().err
 
 
@@ -138,9 +156,13 @@ def test_unsupported_encoding_and_no_matching_frames(tmp_path, capsys):
     img = depth_to_image(np.ones((8, 8)), "32FC1", h)
     bad = Image(header=h, height=8, width=8, encoding="mono8", step=8, data=bytes(64))
     bag = _bag_of(tmp_path / "bad", [(START, [("/d", bad), ("/n", img), ("/m", img)])])
-    args = ["--depth-topic", "/d", "--nocs-topic", "/n", "--mask-topic", "/m", "--out", str(tmp_path / "o")]
+    args = ["--depth-topic", "/d", "--nocs-topic", "/n", "--mask-topic", "/m", "--out",
+            str(tmp_path / "o")]
     assert rp.main([str(bag)] + args) == 2
-    assert "depth topic: unsupported encoding 'mono8'; supported: 32FC1, 64FC1, 16UC1" in capsys.readouterr().err
+    assert (
+        "depth topic: unsupported encoding 'mono8'; supported: 32FC1, 64FC1, 16UC1"
+        in capsys.readouterr().err
+    )
     # Depth and mask never share a stamp: nothing matches, the replay says so.
     from msg_adapters import mask_to_image, nocs_to_image
     frames = []
@@ -162,8 +184,9 @@ def test_truncated_mcap_keeps_what_came_before(tmp_path, capsys):
     data = f.read_bytes()
     f.write_bytes(data[: len(data) // 2])
     out = tmp_path / "out"
-    code = rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic", mb.TOPICS["nocs"],
-                    "--mask-topic", mb.TOPICS["mask"], "--truth-topic", mb.TOPICS["truth"], "--out", str(out)])
+    code = rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic",
+                    mb.TOPICS["nocs"], "--mask-topic", mb.TOPICS["mask"], "--truth-topic",
+                    mb.TOPICS["truth"], "--out", str(out)])
     text = capsys.readouterr().out
     assert code == 3 and "bag damaged" in text
     rows = read_csv(out / "estimates.csv")
@@ -177,8 +200,9 @@ def test_damaged_sqlite_is_a_clear_error(tmp_path, capsys):
     bag = tiny_bag(tmp_path / "in", frames=3, storage="sqlite3")
     f = next(bag.glob("*.db3"))
     f.write_bytes(f.read_bytes()[:4096])
-    assert rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic", mb.TOPICS["nocs"],
-                    "--mask-topic", mb.TOPICS["mask"], "--out", str(tmp_path / "o")]) == 2
+    assert rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic",
+                    mb.TOPICS["nocs"], "--mask-topic", mb.TOPICS["mask"], "--out",
+                    str(tmp_path / "o")]) == 2
     assert "cannot open bag" in capsys.readouterr().err
 
 
@@ -202,10 +226,14 @@ def test_play_mode_timing_and_order(tmp_path):
         sub_node = Node("play_listener", context=ctx)
         got = {t: [] for t in topics}
         for t in topics:
-            sub_node.create_subscription(Image, t, lambda m, t=t: got[t].append((stamp_ns(m), time.monotonic())), 50)
+            sub_node.create_subscription(
+                Image, t, lambda m, t=t: got[t].append((stamp_ns(m), time.monotonic())), 50
+            )
         ex.add_node(sub_node)
         result = {}
-        th = threading.Thread(target=lambda: result.setdefault("r", rp.play(bag, topics, rate=2.0, context=ctx)))
+        th = threading.Thread(
+            target=lambda: result.setdefault("r", rp.play(bag, topics, rate=2.0, context=ctx))
+        )
         th.start()
         assert spin_until(ex, lambda: all(len(v) == 6 for v in got.values()), 30)
         th.join(10)
@@ -220,14 +248,16 @@ def test_play_mode_timing_and_order(tmp_path):
         sub_node.destroy_node()
 
 
-@pytest.mark.parametrize("key", [("/**",), ("fcop_node",), ("/**/fcop_node",), ("/camera/fcop_node",),
+@pytest.mark.parametrize("key",
+                         [("/**",), ("fcop_node",), ("/**/fcop_node",), ("/camera/fcop_node",),
                                  ("robot", "fcop_node")])
 def test_params_file_applies_whatever_the_namespace(tmp_path, key):
     """The replayed node runs in /fcop; a file written for the user's fcop_node (at the root, under
     a namespace, nested, or for any node) still sets its parameters, and -p comes after it."""
     import yaml
     bag = tiny_bag(tmp_path / "in", frames=3)
-    section = {"ros__parameters": {"publish_poses": False, "publish_markers": False, "min_frames": 2}}
+    section = {"ros__parameters": {"publish_poses": False, "publish_markers": False,
+                                   "min_frames": 2}}
     for k in reversed(key):
         section = {k: section}
     pf = tmp_path / "params.yaml"
@@ -236,7 +266,8 @@ def test_params_file_applies_whatever_the_namespace(tmp_path, key):
     topics, msgs = read_bag(tmp_path / "out" / "fcop_output")
     assert set(topics) == {"/fcop/camera_info"}              # no poses, no markers
     assert s.frames_read == 3 and s.frames_estimated == 2      # the window waited for 2 frames
-    s = run(bag, tmp_path / "out2", params_file=str(pf), overrides=["min_frames:=1", "publish_poses:=true"])
+    s = run(bag, tmp_path / "out2", params_file=str(pf),
+            overrides=["min_frames:=1", "publish_poses:=true"])
     topics, _ = read_bag(tmp_path / "out2" / "fcop_output")
     assert set(topics) == {"/fcop/camera_info", "/fcop/object_poses"} and s.frames_estimated == 3
 
@@ -252,17 +283,30 @@ def test_play_publishes_the_recorded_time_on_clock(tmp_path):
     with ros_context() as (ctx, ex):
         listener = Node("clock_listener", context=ctx)
         events = []
-        listener.create_subscription(Clock, "/clock", lambda m: events.append(("clock", stamp_ns_of(m.clock))), 100)
-        listener.create_subscription(Image, topics[0], lambda m: events.append(("depth", stamp_ns(m))), 100)
-        follower = Node("sim_time_follower", context=ctx, parameter_overrides=[Parameter("use_sim_time", value=True)])
+        listener.create_subscription(Clock, "/clock",
+                                     lambda m: events.append(("clock", stamp_ns_of(m.clock))), 100)
+        listener.create_subscription(Image, topics[0],
+                                     lambda m: events.append(("depth", stamp_ns(m))), 100)
+        follower = Node("sim_time_follower", context=ctx,
+                        parameter_overrides=[Parameter("use_sim_time", value=True)])
         ex.add_node(listener)
         ex.add_node(follower)
         result = {}
-        th = threading.Thread(target=lambda: result.setdefault("r", rp.play(bag, topics, rate=2.0, context=ctx,
-                                                                             clock_hz=50.0)))
+        th = threading.Thread(
+            target=lambda: result.setdefault(
+                "r", rp.play(bag, topics, rate=2.0, context=ctx, clock_hz=50.0)
+            )
+        )
         th.start()
-        assert spin_until(ex, lambda: "r" in result and follower.get_clock().now().nanoseconds == stamps[-1]
-                          and sum(e[0] == "depth" for e in events) == 5, 30)
+        assert spin_until(
+            ex,
+            lambda: (
+                "r" in result
+                and follower.get_clock().now().nanoseconds == stamps[-1]
+                and sum(e[0] == "depth" for e in events) == 5
+            ),
+            30,
+        )
         th.join(10)
         clock = [t for kind, t in events if kind == "clock"]
         assert clock == sorted(clock) and clock[0] == stamps[0] and clock[-1] == stamps[-1]
@@ -283,8 +327,9 @@ def test_play_on_a_truncated_bag_reports_the_damage(tmp_path, capsys):
     f = next(bag.glob("*.mcap"))
     data = f.read_bytes()
     f.write_bytes(data[: len(data) // 2])
-    code = rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic", mb.TOPICS["nocs"],
-                    "--mask-topic", mb.TOPICS["mask"], "--play", "--rate", "50"])
+    code = rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic",
+                    mb.TOPICS["nocs"], "--mask-topic", mb.TOPICS["mask"], "--play",
+                    "--rate", "50"])
     out, err = capsys.readouterr()
     published = int(out.split()[1])
     assert code == 3 and 3 <= published < 24

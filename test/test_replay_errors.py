@@ -29,7 +29,8 @@ def bag(tmp_path_factory):
 
 def args(bag, out, *extra):
     return [str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic", mb.TOPICS["nocs"],
-            "--mask-topic", mb.TOPICS["mask"], "--truth-topic", mb.TOPICS["truth"], "--out", str(out), *extra]
+            "--mask-topic", mb.TOPICS["mask"], "--truth-topic", mb.TOPICS["truth"], "--out",
+            str(out), *extra]
 
 
 def one_line(err: str) -> str:
@@ -41,13 +42,15 @@ def one_line(err: str) -> str:
 
 @contextlib.contextmanager
 def read_only_dir(path: Path):
-    """A directory nobody can write into, root included (permission bits, else the immutable flag)."""
+    """A directory nobody can write into, root included (permission bits, else the immutable
+    flag)."""
     path.mkdir()
     path.chmod(0o555)
     immutable = False
     try:
         if os.access(path, os.W_OK):  # root ignores permission bits
-            immutable = subprocess.run(["chattr", "+i", str(path)], capture_output=True).returncode == 0
+            immutable = subprocess.run(["chattr", "+i", str(path)],
+                                       capture_output=True).returncode == 0
             if not immutable:
                 pytest.skip("cannot make a read-only directory on this machine")
         yield path
@@ -79,15 +82,27 @@ def test_misspelt_parameter_name_is_refused_with_the_known_names(bag, tmp_path, 
     assert all(name in line for name in PARAMETERS)
 
 
-@pytest.mark.parametrize("content, expected", [
-    (None, "cannot read --params-file"),
-    ("fcop_node:\n  ros__parameters:\n    window_frames: [1\n", "is not valid YAML (line"),
-    ("- just\n- a list\n", "is not a ROS 2 parameter file"),
-    ("other_node:\n  ros__parameters:\n    window_frames: 3\n", "has no section for fcop_node (it has: other_node)"),
-    ("/**:\n  ros__parameters:\n    window_frames: -4\n", "parameter window_frames=-4 from --params-file"),
-    ("/**:\n  ros__parameters:\n    widow_frames: 4\n", "unknown parameter 'widow_frames' from --params-file"),
-    ("fcop_node:\n  window_frames: 4\n", "section 'fcop_node/window_frames' is not a mapping"),
-])
+@pytest.mark.parametrize(
+    "content, expected",
+    [
+        (None, "cannot read --params-file"),
+        ("fcop_node:\n  ros__parameters:\n    window_frames: [1\n", "is not valid YAML (line"),
+        ("- just\n- a list\n", "is not a ROS 2 parameter file"),
+        (
+            "other_node:\n  ros__parameters:\n    window_frames: 3\n",
+            "has no section for fcop_node (it has: other_node)",
+        ),
+        (
+            "/**:\n  ros__parameters:\n    window_frames: -4\n",
+            "parameter window_frames=-4 from --params-file",
+        ),
+        (
+            "/**:\n  ros__parameters:\n    widow_frames: 4\n",
+            "unknown parameter 'widow_frames' from --params-file",
+        ),
+        ("fcop_node:\n  window_frames: 4\n", "section 'fcop_node/window_frames' is not a mapping"),
+    ],
+)
 def test_invalid_params_file_is_refused(bag, tmp_path, capsys, content, expected):
     pf = tmp_path / "params.yaml"
     if content is not None:
@@ -100,18 +115,27 @@ def test_params_file_sections_for_any_namespace(tmp_path):
     """Wildcard sections apply first, the node's own (any namespace, nested or not) after them,
     then -p; sections of other nodes are ignored."""
     pf = tmp_path / "p.yaml"
-    pf.write_text("other:\n  ros__parameters:\n    window_frames: 999\n"
-                  "/camera/fcop_node:\n  ros__parameters:\n    window_frames: 7\n    seed: 5\n"
-                  "/**:\n  ros__parameters:\n    window_frames: 9\n    min_support: 40\n    use_sim_time: false\n"
-                  "robot:\n  arm:\n    fcop_node:\n      ros__parameters:\n        min_frames: 3\n")
-    assert rp.load_params_file(pf) == {"window_frames": 7, "min_support": 40, "use_sim_time": False,
-                                       "seed": 5, "min_frames": 3}
-    params = rp.node_parameters(str(pf), ["seed:=11", "focal_min:=60", "noise_bound_mode:=absolute",
+    pf.write_text(
+        "other:\n  ros__parameters:\n    window_frames: 999\n"
+        "/camera/fcop_node:\n  ros__parameters:\n    window_frames: 7\n    seed: 5\n"
+        "/**:\n  ros__parameters:\n    window_frames: 9\n    min_support: 40\n    use_sim_time: "
+        "false\n"
+        "robot:\n  arm:\n    fcop_node:\n      ros__parameters:\n        min_frames: 3\n"
+    )
+    assert rp.load_params_file(pf) == {"window_frames": 7, "min_support": 40,
+                                       "use_sim_time": False, "seed": 5, "min_frames": 3}
+    params = rp.node_parameters(str(pf),
+                                ["seed:=11", "focal_min:=60", "noise_bound_mode:=absolute",
                                           "noise_bound:=5"])
     assert params["seed"] == 11 and params["window_frames"] == 7
-    assert params["focal_min"] == 60.0 and type(params["focal_min"]) is float  # an int for a double
+    # an int for a double
+    assert params["focal_min"] == 60.0 and type(params["focal_min"]) is float
     assert params["noise_bound"] == 5.0 and params["noise_bound_mode"] == "absolute"
-    assert rp.parse_value("1e3") == 1000.0 and rp.parse_value("true") is True and rp.parse_value("x") == "x"
+    assert (
+        rp.parse_value("1e3") == 1000.0
+        and rp.parse_value("true") is True
+        and rp.parse_value("x") == "x"
+    )
 
 
 def test_out_is_a_file(bag, tmp_path, capsys):
@@ -165,7 +189,9 @@ class _FullAfter:
         self.fh.close()
 
 
-def test_disk_full_midway_keeps_the_rows_before_and_says_what_was_lost(bag, tmp_path, capsys, monkeypatch):
+def test_disk_full_midway_keeps_the_rows_before_and_says_what_was_lost(
+    bag, tmp_path, capsys, monkeypatch
+):
     real_open = open
 
     def open_on_small_disk(path, mode="r", *a, **kw):
@@ -177,7 +203,9 @@ def test_disk_full_midway_keeps_the_rows_before_and_says_what_was_lost(bag, tmp_
     (out / "report.png").mkdir(parents=True)  # and the report cannot be written either
     assert rp.main(args(bag, out)) == 4
     line = one_line(capsys.readouterr().err)
-    assert line.startswith(f"fcop_replay: cannot write {out}/estimates.csv: No space left on device; ")
+    assert line.startswith(
+        f"fcop_replay: cannot write {out}/estimates.csv: No space left on device; "
+    )
     # The rows are written as they come: the three before the disk filled are on disk.
     with real_open(out / "estimates.csv") as fh:
         rows = list(csv.DictReader(fh))
@@ -194,16 +222,18 @@ def test_subprocess_exit_codes_without_traceback(bag, tmp_path):
     """The installed entry point, as a user runs it."""
     exe = [sys.executable, "-m", "fcop_ros.replay"]
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    r = subprocess.run(exe + args(bag, tmp_path / "o", "-p", "window_frames:=abc"), capture_output=True,
-                       text=True, env=env, timeout=120)
+    r = subprocess.run(exe + args(bag, tmp_path / "o", "-p", "window_frames:=abc"),
+                       capture_output=True, text=True, env=env, timeout=120)
     assert r.returncode == 2 and "must be int, got 'abc'" in one_line(r.stderr)
     (tmp_path / "f").write_text("")
-    r = subprocess.run(exe + args(bag, tmp_path / "f"), capture_output=True, text=True, env=env, timeout=120)
+    r = subprocess.run(exe + args(bag, tmp_path / "f"), capture_output=True, text=True, env=env,
+                       timeout=120)
     assert r.returncode == 4 and "exists and is not a directory" in one_line(r.stderr)
 
 
 def test_the_shipped_config_applies_to_the_replayed_node():
-    """Whether config/fcop.yaml is keyed 'fcop_node:' or '/**:', replay finds every parameter in it."""
+    """Whether config/fcop.yaml is keyed 'fcop_node:' or '/**:', replay finds every parameter in
+    it."""
     from fcop_ros.config import config_path
     params = rp.node_parameters(None)
     assert set(PARAMETERS) <= set(params)

@@ -14,7 +14,8 @@ def _solve_batch(x, d, p):
 
 
 def test_noise_free_stability_paper_simulation():
-    """10^5 noise-free triplets (paper Sec. IV-A): median relative focal error < 1e-9, >= 99.99% valid."""
+    """10^5 noise-free triplets (paper Sec. IV-A): median relative focal error < 1e-9,
+    >= 99.99% valid."""
     rng = np.random.default_rng(2024)
     x, d, p, f_true, s_true = simulate_triplet_batch(rng, 100_000)
     f, s2, valid = _solve_batch(x, d, p)
@@ -30,7 +31,8 @@ def test_third_row_is_pair_ik():
     identical still solves exactly, which the paper's printed matrix (row (j,k) twice) cannot."""
     rng = np.random.default_rng(1)
     trial = simulate_points(rng, 3)
-    f, s2, ok = solve_triplets(trial.x, trial.d, trial.p, np.array([[0, 1, 2], [2, 1, 0], [1, 0, 2]]))
+    f, s2, ok = solve_triplets(trial.x, trial.d, trial.p,
+                               np.array([[0, 1, 2], [2, 1, 0], [1, 0, 2]]))
     assert ok.all()
     np.testing.assert_allclose(f, trial.focal, rtol=1e-9)
     np.testing.assert_allclose(s2, trial.scale ** 2, rtol=1e-9)
@@ -74,12 +76,17 @@ def test_shape_errors_are_clear():
 
 
 def test_empty_and_sampling():
-    f, s2, ok = solve_triplets(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3), int))
+    f, s2, ok = solve_triplets(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3)),
+                               np.zeros((0, 3), int))
     assert f.shape == s2.shape == ok.shape == (0,)
     rng = np.random.default_rng(0)
     tri = sample_triplets(5, 10_000, rng)
     assert tri.min() >= 0 and tri.max() <= 4
-    assert (tri[:, 0] != tri[:, 1]).all() and (tri[:, 1] != tri[:, 2]).all() and (tri[:, 0] != tri[:, 2]).all()
+    assert (
+        (tri[:, 0] != tri[:, 1]).all()
+        and (tri[:, 1] != tri[:, 2]).all()
+        and (tri[:, 0] != tri[:, 2]).all()
+    )
     # Every ordered triplet of distinct indices occurs about equally often (5*4*3 = 60 of them).
     codes = tri[:, 0] * 25 + tri[:, 1] * 5 + tri[:, 2]
     counts = np.unique(codes, return_counts=True)[1]

@@ -67,7 +67,10 @@ def test_relative_bound_is_scale_free_and_absolute_is_pixels():
     # +-1.5% joins 500/510 and 1000/1020 alike: the same relative spread counts the same.
     assert interval_stabbing(lo[:3], hi[:3]).count == interval_stabbing(lo[3:], hi[3:]).count == 2
     lo, hi, back = focal_intervals(votes, 5.0, "absolute")
-    assert interval_stabbing(lo[:3], hi[:3]).count == 2 and interval_stabbing(lo[3:], hi[3:]).count == 1
+    assert (
+        interval_stabbing(lo[:3], hi[:3]).count == 2
+        and interval_stabbing(lo[3:], hi[3:]).count == 1
+    )
     with pytest.raises(ValueError):
         focal_intervals(votes, 0.0, "relative")
     with pytest.raises(ValueError):

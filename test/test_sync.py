@@ -143,7 +143,10 @@ def test_isolated_outlier_frame_is_dropped_and_counted_per_input(bad_ms):
     sets = run(sync, events)
     check_invariants(sets, 3)
     assert len(sets) == 10 and sync.stats.resets == 0
-    assert dict(sync.stats.outliers) == {0: 1, 1: 1, 2: 1} and sync.stats.dropped["outlier_stamp"] == 3
+    assert (
+        dict(sync.stats.outliers) == {0: 1, 1: 1, 2: 1}
+        and sync.stats.dropped["outlier_stamp"] == 3
+    )
     assert all(bad_ms * MS not in (m[1] for m in s) for s in sets)
 
 
@@ -184,7 +187,11 @@ def test_configure_keeps_queued_messages():
     sync = StampSynchronizer(3, queue_size=5)
     run(sync, [(0, k * MS) for k in range(1, 5)])
     sync.configure(queue_size=2, slop=0.002)
-    assert sync.pending() == 2 and sync.stats.per_input[("queue_full", 0)] == 2 and sync.slop_ns == 2 * MS
+    assert (
+        sync.pending() == 2
+        and sync.stats.per_input[("queue_full", 0)] == 2
+        and sync.slop_ns == 2 * MS
+    )
     assert len(run(sync, [(1, 4 * MS + MS), (2, 4 * MS)])) == 1
 
 

@@ -15,8 +15,8 @@ from fcop_ros.bagio import BagSource
 from fcop_ros.synthetic import SequenceSpec
 
 ROOT = Path(__file__).resolve().parents[1]
-PARSERS = {"fcop_make_bag": mb.build_parser, "fcop_replay": rp.build_parser, "fcop_eval_nocs": nocs_eval.build_parser,
-           "fcop_demo": demo.build_parser}
+PARSERS = {"fcop_make_bag": mb.build_parser, "fcop_replay": rp.build_parser,
+           "fcop_eval_nocs": nocs_eval.build_parser, "fcop_demo": demo.build_parser}
 
 
 @pytest.mark.parametrize("prog", sorted(PARSERS))
@@ -30,7 +30,7 @@ def test_every_option_has_help_and_shows_its_default(prog):
         assert action.help and len(action.help) > 8, (prog, action.dest)
         helptext = parser.formatter_class(prog)._get_help_string(action)
         if action.default is not None and not action.required:
-            assert f"(default: %(default)s)" in helptext, (prog, action.dest)
+            assert "(default: %(default)s)" in helptext, (prog, action.dest)
     assert "exit codes:" in text
 
 
@@ -48,9 +48,10 @@ def test_make_bag_shows_progress_on_a_terminal(tmp_path):
     import struct
     import termios
     master, slave = pty.openpty()
-    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 30, 100, 0, 0))  # a 100-column terminal
-    proc = subprocess.Popen([sys.executable, "-m", "fcop_ros.make_bag", str(tmp_path / "b"), "--frames", "3",
-                             "--width", "64", "--height", "48", "--objects", "2"],
+    # a 100-column terminal
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 30, 100, 0, 0))
+    proc = subprocess.Popen([sys.executable, "-m", "fcop_ros.make_bag", str(tmp_path / "b"),
+                             "--frames", "3", "--width", "64", "--height", "48", "--objects", "2"],
                             stdout=subprocess.PIPE, stderr=slave, cwd=ROOT)
     os.close(slave)
     chunks = []
@@ -100,7 +101,9 @@ def test_compressed_bag_is_smaller_and_reads_back_the_same(tmp_path, storage):
     plain, packed = _decoded(tmp_path / "none"), _decoded(tmp_path / "zstd")
     assert len(plain) == 15 and packed == plain
     assert sizes["zstd"] < 0.6 * sizes["none"]
-    meta = yaml.safe_load((tmp_path / "zstd" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    meta = yaml.safe_load((tmp_path / "zstd" / "metadata.yaml").read_text())[
+        "rosbag2_bagfile_information"
+    ]
     # rosbag2's own reading: MCAP compresses chunks inside the file (no bag-level mode), sqlite3
     # compresses every message (mode 'message', format zstd).
     expected = ("", "") if storage == "mcap" else ("zstd", "message")
@@ -112,7 +115,8 @@ def test_compressed_bag_is_smaller_and_reads_back_the_same(tmp_path, storage):
 
 def test_truncated_compressed_mcap_is_read_up_to_the_damage(tmp_path):
     bag = tmp_path / "b"
-    mb.make_bag(bag, SequenceSpec(8, 160, 120, 150.0, None, None, "mild", 3), seed=1, compression="zstd")
+    mb.make_bag(bag, SequenceSpec(8, 160, 120, 150.0, None, None, "mild", 3), seed=1,
+                compression="zstd")
     full = _messages(bag)[1]
     f = next(bag.glob("*.mcap"))
     f.write_bytes(f.read_bytes()[: f.stat().st_size * 2 // 3])

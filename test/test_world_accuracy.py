@@ -1,21 +1,20 @@
 """The estimator on the randomised world: no bias from zero-mean errors, an honest std_rel,
 refusal of NOCS that only look like evidence, reflection invariance, the focal range, and a
 frame with 10,000 instances. Numbers in the comments were measured on these seeds."""
-import functools
 import time
 
 import numpy as np
 import pytest
 
 from fcop_ros import FocalWindow, estimate_focal
-from fcop_ros.synthetic.world import ZERO_MEAN_FAMILIES, world_frame, world_frames
+from fcop_ros.synthetic import scenes
+from fcop_ros.synthetic.world import ZERO_MEAN_FAMILIES, world_frames
 
 FIRST_SEED = 7000  # not the tuning seeds (1000..) nor the held-out ones (900000..)
 
 
-@functools.lru_cache(maxsize=None)
 def frame(preset, seed, size=None):
-    return world_frame(preset, FIRST_SEED + seed, size=size)
+    return scenes.world_frame(preset, FIRST_SEED + seed, size)
 
 
 def signed_errors(preset, n):
@@ -45,7 +44,8 @@ def test_no_bias_from_a_zero_mean_mechanism(family):
 
 # Full presets: sensor (40 frames) median |e| 0.013%, signed -0.00%, coverage 97.5%;
 # predicted (80 frames) median |e| 2.8%, signed +0.90%, coverage 86%.
-@pytest.mark.parametrize("preset,frames,cover_min", [("sensor", 40, 0.85), ("predicted", 80, 0.85)])
+@pytest.mark.parametrize("preset,frames,cover_min",
+                         [("sensor", 40, 0.85), ("predicted", 80, 0.85)])
 def test_full_presets_unbiased_and_std_rel_covers(preset, frames, cover_min):
     err, cover = signed_errors(preset, frames)
     assert err.size == frames
@@ -92,7 +92,8 @@ def test_nocs_that_only_look_like_evidence_give_no_focal(kind):
     """Measured: 0 of 8 frames answered, each with the reason below."""
     for s in range(8):
         fr = frame("predicted", s)
-        est = estimate_focal(fr.depth, _garbage(fr, kind, np.random.default_rng(s)), fr.mask, seed=s)
+        est = estimate_focal(fr.depth, _garbage(fr, kind, np.random.default_rng(s)),
+                             fr.mask, seed=s)
         assert est.focal is None and est.std_rel is None and est.objects == []
         assert "NOCS explain" in est.reason or "consensus" in est.reason
 
@@ -109,9 +110,11 @@ def test_reflections_and_axis_permutations_leave_the_focal_unchanged():
         obj = fr.mask > 0
         flipped = fr.nocs.copy()
         flipped[obj, 2] = 1.0 - flipped[obj, 2]
-        for nocs, mirror in ((flipped, True), (fr.nocs[..., ::-1], True), (fr.nocs[..., [1, 2, 0]], False)):
+        for nocs, mirror in ((flipped, True), (fr.nocs[..., ::-1], True),
+                             (fr.nocs[..., [1, 2, 0]], False)):
             est = estimate_focal(fr.depth, np.ascontiguousarray(nocs), fr.mask, seed=s)
-            assert est.focal == pytest.approx(base.focal, rel=1e-7)  # up to rounding (measured 3e-9)
+            # up to rounding (measured 3e-9)
+            assert est.focal == pytest.approx(base.focal, rel=1e-7)
             if mirror:
                 # A symmetric object's reflection is also a rotation of it: only the others show.
                 assert est.mirrored
@@ -127,7 +130,12 @@ def test_focal_range_bounds_every_result():
     assert est.focal is not None
     for lo, hi in ((1.2 * fr.focal, 3 * fr.focal), (0.2 * fr.focal, 0.8 * fr.focal)):
         out = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0, focal_range=(lo, hi))
-        assert out.focal is None and "focal_range" in out.reason or out.focal is not None and lo <= out.focal <= hi
+        assert (
+            out.focal is None
+            and "focal_range" in out.reason
+            or out.focal is not None
+            and lo <= out.focal <= hi
+        )
 
 
 def test_ten_thousand_instances_are_answered_with_linear_work():

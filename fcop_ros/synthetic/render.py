@@ -22,9 +22,12 @@ SHAPES = {
     "can": [("cyl", (0, 0, 0), 1.0, 1.2, True, True)],
     "box": [("box", (0, 0, 0), (1.2, 0.6, 0.8))],
     "bowl": [("cap", (0, 0.7, 0), 1.2, 0.05)],
-    "mug": [("cyl", (0, 0, 0), 0.8, 0.95, False, True), ("box", (1.05, 0.05, 0), (0.25, 0.55, 0.12))],
-    "bottle": [("cyl", (0, -0.35, 0), 0.6, 0.85, True, True), ("cyl", (0, 0.85, 0), 0.25, 0.35, True, False)],
-    "camera": [("box", (0, -0.1, 0), (1.0, 0.6, 0.5)), ("cyl", (0, -0.1, 0.75), 0.45, 0.25, False, False)],
+    "mug": [("cyl", (0, 0, 0), 0.8, 0.95, False, True),
+            ("box", (1.05, 0.05, 0), (0.25, 0.55, 0.12))],
+    "bottle": [("cyl", (0, -0.35, 0), 0.6, 0.85, True, True),
+               ("cyl", (0, 0.85, 0), 0.25, 0.35, True, False)],
+    "camera": [("box", (0, -0.1, 0), (1.0, 0.6, 0.5)),
+               ("cyl", (0, -0.1, 0.75), 0.45, 0.25, False, False)],
 }
 CATEGORIES = tuple(SHAPES)
 
@@ -113,7 +116,8 @@ def _hit_cap(o, v, c, r, cut):
 
 
 def intersect(shape: str, o: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Ray parameter of the first hit of rays o + lam v (canonical units) with a shape; inf if none."""
+    """Ray parameter of the first hit of rays o + lam v (canonical units) with a shape; inf if
+    none."""
     prims, _ = _NORMALISED[shape]
     best = np.full(len(o), np.inf)
     for p in prims:
@@ -185,7 +189,9 @@ def render(objects, focal: float, width: int = 640, height: int = 480, principal
         if u0 > u1 or v0 > v1:
             continue
         vv, uu = np.mgrid[v0:v1 + 1, u0:u1 + 1]
-        rays = np.stack([(uu.ravel() - cx) / focal, (vv.ravel() - cy) / focal, np.ones(uu.size)], 1)
+        rays = np.stack(
+            [(uu.ravel() - cx) / focal, (vv.ravel() - cy) / focal, np.ones(uu.size)], 1
+        )
         o = np.broadcast_to(-R.T @ t / s, rays.shape)
         v = rays @ R / s
         lam = intersect(ob.category, o, v)
@@ -238,7 +244,10 @@ def random_scene(rng: np.random.Generator, n_objects: int = 5, focal: float | No
         ext = extents(cat)
         radius = 0.5 * s * np.hypot(ext[0], ext[2])
         for _ in range(50):
-            a, b = rng.uniform(-half_w, half_w), rng.uniform(-half_h, half_h) / max(np.sin(phi), 0.3)
+            a, b = (
+                rng.uniform(-half_w, half_w),
+                rng.uniform(-half_h, half_h) / max(np.sin(phi), 0.3),
+            )
             pos = centre + a * e1 + b * e2
             if all(np.linalg.norm(pos - p) > radius + r + 0.01 for p, r in spots):
                 break

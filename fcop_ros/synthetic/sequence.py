@@ -13,7 +13,8 @@ from .render import Frame, SceneObject, random_scene, render
 
 @dataclass
 class SequenceSpec:
-    """What a sequence shows: frames, size, focal (px), zoom, noise preset, objects, orbit speed."""
+    """What a sequence shows: frames, size, focal (px), zoom, noise preset, objects and orbit
+    speed."""
 
     frames: int = 60
     width: int = 640
@@ -32,7 +33,8 @@ class SequenceSpec:
 
 
 def camera_sequence(spec: SequenceSpec, seed: int = 0):
-    """Yield (k, frame) for every frame of the sequence; frames carry their true focal and poses."""
+    """Yield (k, frame) for every frame of the sequence; frames carry their true focal and
+    poses."""
     rng = np.random.default_rng(seed)
     # Lay the scene out for the narrowest field of view so a zoom keeps the objects in view.
     layout = max(spec.focal, spec.zoom_focal or 0.0)
@@ -40,7 +42,8 @@ def camera_sequence(spec: SequenceSpec, seed: int = 0):
     centre, up = table
     for k in range(spec.frames):
         R = Rotation.from_rotvec(np.radians(spec.orbit_deg_per_frame * k) * up).as_matrix()
-        moved = [SceneObject(o.instance_id, o.category, R @ o.rotation, R @ (o.translation - centre) + centre, o.scale)
+        moved = [SceneObject(o.instance_id, o.category, R @ o.rotation,
+                             R @ (o.translation - centre) + centre, o.scale)
                  for o in objs]
         frame: Frame = render(moved, spec.focal_at(k), spec.width, spec.height, table=table)
         yield k, apply_noise(frame, spec.preset, rng)

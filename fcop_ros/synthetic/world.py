@@ -15,6 +15,9 @@ Named presets (``WORLD_PRESETS``):
   Calibrated so that the paper's method taken literally scores near the paper's 6.87% (REAL275).
 - ``only_<family>``: one zero-mean mechanism alone, for bias tests.
 
+The older fixed presets of :mod:`fcop_ros.synthetic.noise` (``mild``, ``moderate``, ``harsh``)
+are fixed settings of these same mechanisms: each is written once, in :func:`apply_errors`.
+
 The held-out variant (``variant="heldout"``) builds its smooth fields from random sinusoids
 instead of interpolated grids, its NOCS distortion from a quadratic warp instead of a field and
 its mask errors with an elliptic kernel: a different error model with the same strengths.
@@ -65,7 +68,8 @@ class ErrorFamilies:
     def scaled(self, k: float) -> "ErrorFamilies":
         """Every continuous strength times k (integers and the field scales unchanged)."""
         return replace(self, **{f.name: getattr(self, f.name) * k for f in fields(self)
-                                if isinstance(getattr(self, f.name), float) and f.name != "field_drift"})
+                                if isinstance(getattr(self, f.name), float)
+                                and f.name != "field_drift"})
 
     def draw(self, rng: np.random.Generator) -> "ErrorFamilies":
         """The strengths of one sequence: each family uniform in [0, bound] (integers inclusive;
@@ -84,13 +88,15 @@ class ErrorFamilies:
         return ErrorFamilies(**out)
 
 
-ZERO_MEAN_FAMILIES = ("field", "relief", "offset", "depth_pixel", "nocs_pixel", "nocs_field", "shape")
+ZERO_MEAN_FAMILIES = ("field", "relief", "offset", "depth_pixel", "nocs_pixel",
+                      "nocs_field", "shape")
 
 _SENSOR = ErrorFamilies(depth_scale=0.0, field=0.01, field_drift=0.6, relief=0.0, offset=0.004,
                         depth_pixel=0.004, edge_px=2, flying=0.5, mask_px=2)
 _PREDICTED = ErrorFamilies(depth_scale=0.15, field=0.05, field_drift=0.6, relief=0.10, offset=0.02,
-                           depth_pixel=0.005, edge_px=3, flying=0.3, nocs_pixel=0.04, nocs_field=0.03,
-                           nocs_outliers=0.05, nocs_blur_px=3, shape=0.10, mask_px=3, blobs=2)
+                           depth_pixel=0.005, edge_px=3, flying=0.3, nocs_pixel=0.04,
+                           nocs_field=0.03, nocs_outliers=0.05, nocs_blur_px=3, shape=0.10,
+                           mask_px=3, blobs=2)
 # Scale factors of the two presets, calibrated so that the paper's method taken literally scores
 # near the paper's REAL275 figures (bench/world_calibration.py prints the fit).
 SENSOR_GAIN = 1.0
@@ -103,8 +109,9 @@ WORLD_PRESETS = {
 }
 for _name in ZERO_MEAN_FAMILIES:
     _bound = getattr(_PREDICTED, _name)
-    WORLD_PRESETS[f"only_{_name}"] = ErrorFamilies(**{_name: _bound},
-                                                   **({"field_drift": 0.6} if _name == "field" else {}))
+    WORLD_PRESETS[f"only_{_name}"] = ErrorFamilies(
+        **{_name: _bound}, **({"field_drift": 0.6} if _name == "field" else {})
+    )
 
 
 @dataclass
@@ -147,7 +154,8 @@ class ErrorState:
     objects: dict = field(default_factory=dict)
 
     @staticmethod
-    def start(err: ErrorFamilies, rng: np.random.Generator, variant: str = "tuning") -> "ErrorState":
+    def start(err: ErrorFamilies, rng: np.random.Generator,
+              variant: str = "tuning") -> "ErrorState":
         if variant not in ("tuning", "heldout"):
             raise ValueError(f"unknown error-model variant {variant!r}")
         st = ErrorState(err, variant)
@@ -174,7 +182,8 @@ class ErrorState:
                   "relief": float(rng.uniform(-e.relief, e.relief)) if e.relief > 0 else 0.0}
             self.objects[iid] = ob
         elif e.relief > 0:
-            ob["relief"] = float(np.clip(ob["relief"] + rng.normal(0, 0.3 * e.relief), -e.relief, e.relief))
+            ob["relief"] = float(np.clip(ob["relief"] + rng.normal(0, 0.3 * e.relief),
+                                         -e.relief, e.relief))
         return ob
 
 
@@ -185,7 +194,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
     h, w = depth.shape
     finite = np.isfinite(depth)
     obj = mask > 0
-    # Per-object geometry errors first: relief about the object's median depth, NOCS shape mismatch.
+    # Per-object geometry errors first: relief about the object's median depth, NOCS shape
+    # mismatch.
     for iid in np.unique(mask[obj]):
         m = mask == iid
         ob = state._object(int(iid), rng)
@@ -211,7 +221,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             depth[fly] = lo[fly] + lam * (hi[fly] - lo[fly])
     if e.nocs_blur_px > 0:
         k = 2 * e.nocs_blur_px + 1
-        edge = cv2.morphologyEx(mask.astype(np.float32), cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8)) > 0
+        edge = cv2.morphologyEx(mask.astype(np.float32), cv2.MORPH_GRADIENT,
+                                np.ones((3, 3), np.uint8)) > 0
         band = cv2.dilate(edge.astype(np.uint8), np.ones((k, k), np.uint8)).astype(bool) & obj
         blurred = cv2.GaussianBlur(nocs.astype(np.float32), (k, k), 0).astype(np.float64)
         nocs[band] = blurred[band]
@@ -228,7 +239,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         if state.variant == "heldout":
             warp = state.fields.setdefault("nocs_warp", rng.normal(0, 1, (3, 3)))
             q = nocs - 0.5
-            nocs = nocs + e.nocs_field * np.einsum("hwi,ij,hwj->hw", q, warp, q)[..., None] * np.ones(3)
+            nocs = nocs + e.nocs_field * np.einsum("hwi,ij,hwj->hw", q, warp,
+                                                   q)[..., None] * np.ones(3)
         else:
             for c in range(3):
                 nocs[..., c] += e.nocs_field * state._field(("nocs", c), rng, h, w, 3)
@@ -244,7 +256,9 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         cv2.ellipse(blob, (int(cx), int(cy)), ax, float(rng.uniform(0, 180)), 0, 360, 1, -1)
         blob = blob.astype(bool) & (mask == 0) & np.isfinite(depth)
         mask[blob] = int(mask.max()) + 1
-        nocs[blob] = np.clip(0.5 + 0.3 * np.stack([_grid_field(rng, h, w, 2)[blob] for _ in range(3)], -1), 0, 1)
+        nocs[blob] = np.clip(
+            0.5 + 0.3 * np.stack([_grid_field(rng, h, w, 2)[blob] for _ in range(3)], -1), 0, 1
+        )
     depth[~np.isfinite(depth) | (depth <= 0)] = np.nan
     nocs[mask > 0] = np.clip(nocs[mask > 0], 0.0, 1.0)
     nocs[mask == 0] = 0.0
@@ -257,7 +271,8 @@ def _mask_errors(mask, nocs, px, rng, variant):
     shape = cv2.MORPH_ELLIPSE if variant == "heldout" else cv2.MORPH_RECT
     new = np.zeros_like(mask)
     near = np.stack([cv2.dilate(nocs[..., c].astype(np.float32),
-                                cv2.getStructuringElement(shape, (2 * px + 1,) * 2)) for c in range(3)], -1)
+                                cv2.getStructuringElement(shape, (2 * px + 1,) * 2))
+                     for c in range(3)], -1)
     for iid in np.unique(mask[mask > 0]):
         m = (mask == iid).astype(np.uint8)
         r = int(rng.integers(-px, px + 1))
@@ -280,7 +295,8 @@ class WorldSequence:
     size: tuple
 
 
-def world_scene(rng: np.random.Generator, spec: SceneSpec = SceneSpec(), focal=None, size=None, objects=None):
+def world_scene(rng: np.random.Generator, spec: SceneSpec = SceneSpec(), focal=None, size=None,
+                objects=None):
     """A random scene layout: (objects, focal, table, (width, height))."""
     w, h = size if size is not None else spec.sizes[rng.integers(len(spec.sizes))]
     n = objects if objects is not None else int(rng.integers(spec.objects[0], spec.objects[1] + 1))
@@ -295,9 +311,10 @@ def world_scene(rng: np.random.Generator, spec: SceneSpec = SceneSpec(), focal=N
     return objs, f, table, (w, h)
 
 
-def world_frames(preset: str | ErrorFamilies, seed: int, n_frames: int = 1, variant: str = "tuning",
-                 spec: SceneSpec = SceneSpec(), focal=None, size=None, objects=None, orbit_deg: float = 2.0,
-                 zoom_frame: int | None = None, zoom_factor: float = 1.0) -> WorldSequence:
+def world_frames(preset: str | ErrorFamilies, seed: int, n_frames: int = 1,
+                 variant: str = "tuning", spec: SceneSpec = SceneSpec(), focal=None, size=None,
+                 objects=None, orbit_deg: float = 2.0, zoom_frame: int | None = None,
+                 zoom_factor: float = 1.0) -> WorldSequence:
     """A sequence of ``n_frames`` frames of one random scene seen by a slowly orbiting camera,
     under one random draw of the preset's error families (``zoom_factor`` multiplies the focal
     length from ``zoom_frame`` on)."""
@@ -313,7 +330,8 @@ def world_frames(preset: str | ErrorFamilies, seed: int, n_frames: int = 1, vari
     out = []
     for k in range(n_frames):
         R = Rotation.from_rotvec(np.radians(orbit_deg * k) * up).as_matrix()
-        moved = [SceneObject(o.instance_id, o.category, R @ o.rotation, R @ (o.translation - centre) + centre, o.scale)
+        moved = [SceneObject(o.instance_id, o.category, R @ o.rotation,
+                             R @ (o.translation - centre) + centre, o.scale)
                  for o in objs]
         fk = f * (zoom_factor if zoom_frame is not None and k >= zoom_frame else 1.0)
         out.append(apply_errors(render(moved, fk, w, h, table=(centre, up)), state, rng))
