@@ -49,8 +49,8 @@ def main() -> None:
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
 
-    import fcop_ros.node as node_module
-    from fcop_ros.node import FcopNode
+    import fcop_ros.ros.node as node_module
+    from fcop_ros.ros.node import FcopNode
     if args.slow_ms > 0:
         real = node_module.estimate_focal
 

@@ -5,7 +5,7 @@ import os
 import numpy as np
 import pytest
 
-from fcop_ros.dds import profile_env_vars, ros_distro
+from fcop_ros.ros.dds import profile_env_vars, ros_distro
 
 from fcop_ros.synthetic import apply_noise, render_scene
 

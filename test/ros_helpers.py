@@ -76,7 +76,7 @@ class Harness:
     """fcop_node plus a tester node that publishes inputs and records outputs."""
 
     def __init__(self, ctx, executor, node_args=None, inputs=("depth", "nocs", "mask"), **node_kwargs):
-        from fcop_ros.node import FcopNode
+        from fcop_ros.ros.node import FcopNode
         self.node = FcopNode(context=ctx, cli_args=node_args, **node_kwargs)
         self.tester = Node("tester", context=ctx)
         self.pubs = [self.tester.create_publisher(Image, t, qos_profile_sensor_data) for t in inputs]
@@ -152,7 +152,7 @@ class Gate:
     """Holds the node's estimator: once closed, every frame estimate waits until it is opened."""
 
     def __init__(self, monkeypatch):
-        import fcop_ros.node as node_module
+        import fcop_ros.ros.node as node_module
         self.event = threading.Event()
         self.event.set()
         real = node_module.estimate_focal

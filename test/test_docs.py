@@ -4,7 +4,7 @@ import re
 
 import yaml
 
-from fcop_ros.node import PARAMETERS
+from fcop_ros.ros.node import PARAMETERS
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

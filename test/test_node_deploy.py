@@ -17,7 +17,7 @@ from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
 from conftest import clean_frame, noisy_frame
-from fcop_ros.node import to_fcop_convention
+from fcop_ros.ros.node import to_fcop_convention
 from ros_helpers import Recorder, frame_messages, harness, ros_context, rotation_errors, spin_until, stamp_ns  # noqa
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -12,7 +12,7 @@ from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 
 from conftest import clean_frame, noisy_frame
-from fcop_ros.node import PARAMETERS, READ_ONLY
+from fcop_ros.ros.node import PARAMETERS, READ_ONLY
 from ros_helpers import (Gate, Recorder, frame_messages, harness, header, rotation_errors,  # noqa: F401
                          spin_until, stamp_ns)
 
@@ -53,7 +53,7 @@ def test_bad_parameter_at_start_up_is_one_line_and_exit_2(arg, expected):
     ({"camera_name": "my camera"}, "parameter camera_name='my camera' is not allowed"),
 ])
 def test_bad_parameter_in_process_raises_parameter_error(overrides, expected):
-    from fcop_ros.node import FcopNode, ParameterError
+    from fcop_ros.ros.node import FcopNode, ParameterError
     from ros_helpers import ros_context
     with ros_context() as (ctx, ex):
         with pytest.raises(ParameterError) as err:

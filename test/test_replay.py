@@ -11,9 +11,9 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from fcop_ros import make_bag as mb
-from fcop_ros import replay as rp
-from fcop_ros.bagio import BagSource, BagWriter
+from fcop_ros.tools import make_bag as mb
+from fcop_ros.tools import replay as rp
+from fcop_ros.tools.bagio import BagSource, BagWriter
 from fcop_ros.synthetic import SequenceSpec
 from msg_adapters import depth_to_image
 from ros_helpers import ros_context, spin_until, stamp_ns

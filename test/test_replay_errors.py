@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from fcop_ros import make_bag as mb
-from fcop_ros import replay as rp
-from fcop_ros.bagio import BagSource
-from fcop_ros.node import PARAMETERS
+from fcop_ros.tools import make_bag as mb
+from fcop_ros.tools import replay as rp
+from fcop_ros.tools.bagio import BagSource
+from fcop_ros.ros.node import PARAMETERS
 from fcop_ros.synthetic import SequenceSpec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -192,7 +192,7 @@ def test_disk_full_midway_keeps_the_rows_before_and_says_what_was_lost(bag, tmp_
 
 def test_subprocess_exit_codes_without_traceback(bag, tmp_path):
     """The installed entry point, as a user runs it."""
-    exe = [sys.executable, "-m", "fcop_ros.replay"]
+    exe = [sys.executable, "-m", "fcop_ros.tools.replay"]
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     r = subprocess.run(exe + args(bag, tmp_path / "o", "-p", "window_frames:=abc"), capture_output=True,
                        text=True, env=env, timeout=120)
@@ -204,7 +204,7 @@ def test_subprocess_exit_codes_without_traceback(bag, tmp_path):
 
 def test_the_shipped_config_applies_to_the_replayed_node():
     """Whether config/fcop.yaml is keyed 'fcop_node:' or '/**:', replay finds every parameter in it."""
-    from fcop_ros.config import config_path
+    from fcop_ros.ros.config import config_path
     params = rp.node_parameters(None)
     assert set(PARAMETERS) <= set(params)
     for name, spec in PARAMETERS.items():

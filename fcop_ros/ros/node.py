@@ -1,7 +1,7 @@
 """fcop_node: live focal length from depth, NOCS and instance-mask images.
 
 A thin shell around :mod:`fcop_ros.core`. Input side (subscription callbacks, cheap): every
-message passes the stamp check and the synchroniser (:mod:`fcop_ros.sync`); every depth image
+message passes the stamp check and the synchroniser (:mod:`fcop_ros.ros.sync`); every depth image
 that passes gets its CameraInfo at once, carrying the window's current estimate; every matched
 frame replaces the one in a one-slot hand-off. Estimator side (a worker thread): it takes the
 newest complete frame whenever it is free, estimates it, updates the sliding window (and with
@@ -39,8 +39,8 @@ from visualization_msgs.msg import MarkerArray
 from msg_adapters import (ImageFormatError, camera_info, depth_from_image, marker_array, mask_from_image,
                           nocs_from_image, object_poses, pose_array, stamp_ns)
 
-from .core import FocalWindow, estimate_focal
-from .core.camera import image_centre
+from ..core import FocalWindow, estimate_focal
+from ..core.camera import image_centre
 from .sync import StampSynchronizer
 
 INPUTS = ("depth", "nocs", "mask")

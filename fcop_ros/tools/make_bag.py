@@ -18,8 +18,8 @@ from msg_adapters import (DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS, camer
 
 from .bagio import COMPRESSIONS, STORAGES, BagError, BagWriter
 from .cli import HelpFormatter
-from .core.pose import ObjectPose
-from .synthetic import PRESETS, SequenceSpec, camera_sequence
+from ..core.pose import ObjectPose
+from ..synthetic import PRESETS, SequenceSpec, camera_sequence
 
 TOPICS = dict(depth="/camera/depth", nocs="/camera/nocs", mask="/camera/mask",
               truth="/camera/camera_info_true", poses="/camera/object_poses_true")

@@ -11,7 +11,7 @@ from pathlib import Path
 from .cli import HelpFormatter
 from .make_bag import TOPICS, make_bag
 from .replay import replay
-from .synthetic import PRESETS, SequenceSpec
+from ..synthetic import PRESETS, SequenceSpec
 
 
 def build_parser() -> argparse.ArgumentParser:

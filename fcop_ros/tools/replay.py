@@ -31,8 +31,8 @@ import yaml
 
 from .bagio import BagError, BagSource, BagWriter
 from .cli import HelpFormatter
-from .config import config_path
-from .dds import use_large_image_profile
+from ..ros.config import config_path
+from ..ros.dds import use_large_image_profile
 
 IMAGE_TYPE = "sensor_msgs/msg/Image"
 INFO_TYPE = "sensor_msgs/msg/CameraInfo"
@@ -215,7 +215,7 @@ def parse_overrides(overrides) -> dict:
 def check_parameters(values: dict, where: dict) -> dict:
     """Check names, types, ranges and choices against fcop_node's declared parameters; return the
     values with integers given for double parameters made doubles. ``where`` names the source."""
-    from .node import PARAMETERS
+    from ..ros.node import PARAMETERS
 
     known = sorted(PARAMETERS)
     out = {}
@@ -243,7 +243,7 @@ def check_parameters(values: dict, where: dict) -> dict:
                 and value not in limits:
             raise ReplayError(f"parameter {name}={value!r} from {src} must be one of: {', '.join(limits)}")
         out[name] = value
-    from .node import check_combination
+    from ..ros.node import check_combination
 
     full = {k: (v[0] if isinstance(v, tuple) else v) for k, v in PARAMETERS.items()}
     full.update({k: v for k, v in out.items() if k in PARAMETERS})
@@ -400,7 +400,7 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
 
     from msg_adapters import stamp_ns
 
-    from .node import FcopNode
+    from ..ros.node import FcopNode
 
     inputs = {"depth": depth_topic, "nocs": nocs_topic, "mask": mask_topic}
     source = BagSource(bag)
