@@ -14,7 +14,7 @@ import pytest
 from fcop_ros.tools import make_bag as mb
 from fcop_ros.tools import replay as rp
 from fcop_ros.tools.bagio import BagSource
-from fcop_ros.ros.node import PARAMETERS
+from fcop_ros.ros.params import PARAMETERS
 from fcop_ros.synthetic import SequenceSpec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -208,5 +208,5 @@ def test_the_shipped_config_applies_to_the_replayed_node():
     params = rp.node_parameters(None)
     assert set(PARAMETERS) <= set(params)
     for name, spec in PARAMETERS.items():
-        assert params[name] == spec[0], name
+        assert params[name] == spec.default, name
     assert rp.load_params_file(config_path()) == params

@@ -14,19 +14,19 @@ import dataclasses
 import inspect
 import math
 import os
-import re
 import sys
 import threading
 import time
 from collections import Counter, OrderedDict, deque
+from dataclasses import dataclass
 
 import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.exceptions import ParameterException
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -41,127 +41,48 @@ from msg_adapters import (ImageFormatError, camera_info, depth_from_image, marke
 
 from ..core import FocalWindow, estimate_focal
 from ..core.camera import image_centre
+from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
+from .params import (PARAMETERS, SYNC_PARAMETERS, WINDOW_PARAMETERS, ParameterError, allowed, check_combination,
+                     check_words, descriptor)
 from .sync import StampSynchronizer
+from .worker import LatestSlotWorker
 
 INPUTS = ("depth", "nocs", "mask")
-NOCS_CONVENTIONS = ("fcop", "nocs_dataset")
-
-# name: (default, description, (min, max) or choices or a text constraint or None)
-PARAMETERS = {
-    "window_frames": (30, "Frames in the sliding window of focal evidence.", (1, 1000)),
-    "window_seconds": (0.0, "Also forget frames older than this many seconds (0 = no age limit).", (0.0, 3600.0)),
-    "triplets_per_object": (1500, "Random triplets drawn on each object per frame.", (10, 100000)),
-    "noise_bound": (0.05, "Stabbing half-width: a fraction of f (relative mode) or pixels (absolute).",
-                    (1e-4, 1000.0)),
-    "noise_bound_mode": ("relative", "'relative' (log f, same meaning at every focal) or 'absolute' (pixels).",
-                         ("relative", "absolute")),
-    "focal_min": (50.0, "Smallest focal length considered, pixels.", (1.0, 1e6)),
-    "focal_max": (20000.0, "Largest focal length considered, pixels.", (1.0, 1e6)),
-    "min_object_pixels": (50, "Instances with fewer usable pixels are ignored.", (3, 10000000)),
-    "depth_scale": (0.001, "Metres per unit of 16UC1 depth images (REP-118: millimetres).", (1e-9, 1000.0)),
-    "principal_point_x": (-1.0, "cx in pixels (inside the image); negative = from camera_info_in, else the image "
-                                "centre (W-1)/2.", (-1.0, 1e6)),
-    "principal_point_y": (-1.0, "cy in pixels (inside the image); negative = from camera_info_in, else the image "
-                                "centre (H-1)/2.", (-1.0, 1e6)),
-    "sync_mode": ("exact", "'exact' (equal stamps) or 'approximate' (within sync_slop).", ("exact", "approximate")),
-    "sync_slop": (0.01, "Largest stamp difference within a frame in approximate mode, seconds.", (0.0, 1.0)),
-    "queue_size": (5, "Messages per input waiting in the synchroniser for the other inputs.", (1, 100)),
-    "publish_poses": (True, "Publish object_poses (geometry_msgs/PoseArray).", None),
-    "publish_markers": (True, "Publish object_markers (visualization_msgs/MarkerArray).", None),
-    "min_frames": (1, "Frames the window needs before it reports a focal length.", (1, 1000)),
-    "min_support": (30, "Agreeing triplet votes the window needs before it reports a focal length.", (1, 10000000)),
-    "max_uncertainty": (0.05, "Largest relative standard error (std_rel) of the window's focal length at which "
-                              "CameraInfo is published and a calibration saved.", (1e-6, 1.0)),
-    "diagnostics_period": (1.0, "Seconds between /diagnostics messages.", (0.05, 60.0)),
-    "max_estimate_age": (2.0, "Diagnostics go ERROR when the estimator has been busy with one frame for longer "
-                              "than this many seconds (stalled).", (0.1, 3600.0)),
-    "nocs_convention": ("fcop", "Axes of the NOCS input: 'fcop' (this package's) or 'nocs_dataset' (the NOCS "
-                                "dataset's: z = 1 - z).", NOCS_CONVENTIONS),
-    "camera_name": ("camera", "Camera name in the file ~/save_calibration writes.", "letters, digits, _ and -"),
-    "calibration_file": ("", "File ~/save_calibration writes ('' = ~/.ros/camera_info/<camera_name>.yaml).",
-                         "a file path"),
-    "set_camera_info_service": ("", "sensor_msgs/srv/SetCameraInfo service ~/save_calibration also calls, e.g. the "
-                                    "driver's set_camera_info ('' = none). Read-only.", "a service name"),
-    "seed": (-1, "Random seed of triplet sampling (-1 = from the OS). Read-only.", (-1, 2 ** 31 - 1)),
-}
-# Set once at start-up: refused at run time (the descriptor says read_only).
-READ_ONLY = frozenset({"seed", "set_camera_info_service"})
-WINDOW_PARAMETERS = ("window_frames", "window_seconds", "noise_bound", "noise_bound_mode", "min_frames",
-                     "min_support")
-_NAME = re.compile(r"[A-Za-z0-9_-]+")
 _WINDOW_OPTIONS = frozenset(inspect.signature(FocalWindow).parameters)
 
 
-class ParameterError(ValueError):
-    """A parameter value fcop_node cannot run with; the message names it, its value and what is allowed."""
+@dataclass(frozen=True)
+class LatestEstimate:
+    """What the node published last: the CameraInfo of depth stamp ``stamp_ns`` (focal, principal
+    point, image size) and the window estimate behind it (``std_rel``, ``support`` votes,
+    ``frames`` in the window); ``objects``: the ObjectPoses of the newest processed frame, of this
+    stamp once that frame is processed."""
+
+    stamp_ns: int
+    focal: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+    std_rel: float | None
+    support: int
+    frames: int
+    objects: tuple = ()
 
 
-def allowed(name: str) -> str:
-    """What parameter ``name`` accepts, in words."""
-    default, _, limits = PARAMETERS[name]
-    if isinstance(default, bool):
-        return "true or false"
-    if isinstance(limits, tuple) and isinstance(limits[0], str):
-        return "one of " + ", ".join(limits)
-    if isinstance(limits, tuple):
-        kind = "an integer" if isinstance(default, int) else "a number"
-        return f"{kind} in [{limits[0]}, {limits[1]}]"
-    return f"a string ({limits})"
+@dataclass(frozen=True)
+class NodeCounts:
+    """The node's counters at one moment: input messages ``received``, frames ``matched`` by the
+    synchroniser, ``processed`` by the estimator, ``published`` (poses and markers), ``skipped``
+    in the hand-off for newer ones, CameraInfo messages, and dropped input by reason."""
 
-
-def _descriptor(name, default, description, limits):
-    d = ParameterDescriptor(name=name, description=description, read_only=name in READ_ONLY)
-    if isinstance(limits, tuple) and len(limits) == 2 and not isinstance(limits[0], str):
-        if isinstance(default, bool):
-            pass
-        elif isinstance(default, int):
-            d.integer_range = [IntegerRange(from_value=int(limits[0]), to_value=int(limits[1]), step=1)]
-        else:
-            d.floating_point_range = [FloatingPointRange(from_value=float(limits[0]), to_value=float(limits[1]))]
-    elif isinstance(limits, tuple):
-        d.additional_constraints = "one of: " + ", ".join(limits)
-    elif isinstance(limits, str):
-        d.additional_constraints = limits
-    return d
-
-
-def check_value(name: str, value):
-    """``value`` converted to the parameter's type, or ParameterError naming name, value and range."""
-    default, _, limits = PARAMETERS[name]
-    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
-        value = float(value)
-    if type(value) is not type(default):
-        raise ParameterError(f"parameter {name}={value!r} is not allowed: {allowed(name)}")
-    if isinstance(value, bool):
-        ok = True
-    elif isinstance(limits, tuple) and isinstance(limits[0], str):
-        ok = value in limits
-    elif isinstance(limits, tuple):
-        ok = limits[0] <= value <= limits[1]
-    elif name == "camera_name":
-        ok = bool(_NAME.fullmatch(value))
-    else:
-        ok = "\n" not in value
-    if not ok:
-        raise ParameterError(f"parameter {name}={value!r} is not allowed: {allowed(name)}")
-    return value
-
-
-def check_combination(p: dict, image_size=None) -> str:
-    """What is wrong with a complete set of values together ('' if nothing)."""
-    if p["focal_min"] >= p["focal_max"]:
-        return (f"parameter focal_min={p['focal_min']} is not allowed: it must be below "
-                f"focal_max={p['focal_max']}")
-    if p["noise_bound_mode"] == "relative" and not 0 < p["noise_bound"] <= 0.5:
-        return (f"parameter noise_bound={p['noise_bound']} is not allowed: a fraction in (0, 0.5] in relative "
-                f"noise_bound_mode")
-    if image_size is not None:
-        for axis, size in (("x", image_size[0]), ("y", image_size[1])):
-            v = p[f"principal_point_{axis}"]
-            if v >= 0 and not v <= size - 1:
-                return (f"parameter principal_point_{axis}={v} is not allowed: inside the {image_size[0]}x"
-                        f"{image_size[1]} image, [0, {size - 1}] (or negative for the default)")
-    return ""
+    received: int
+    matched: int
+    processed: int
+    published: int
+    skipped: int
+    camera_info_published: int
+    rejected: dict
 
 
 class _Throttle:
@@ -231,7 +152,7 @@ class FcopNode(Node):
     """The fcop_node ROS 2 node (see the package README for topics, parameters and the rules)."""
 
     def __init__(self, node_name: str = "fcop_node", **kwargs):
-        self._worker = None  # destroy_node works even when the parameters are refused
+        self.worker = None  # destroy_node works even when the parameters are refused
         super().__init__(node_name, **kwargs)
         try:
             self._declare_parameters()
@@ -243,26 +164,21 @@ class FcopNode(Node):
         self._now = time.monotonic  # the clock of rates and ages; replaceable in tests
         self.rejected: Counter = Counter()   # dropped input, by reason
         self.warnings: Counter = Counter()   # accepted input that deserved a word, by reason
-        #: The last CameraInfo publication: (stamp ns, the WindowEstimate it carries, the objects of the
-        #: newest processed frame (of this stamp once that frame is processed), the CameraInfo).
-        self.last = None
+        self._latest: LatestEstimate | None = None  # the last CameraInfo publication (see latest)
         self.received = 0          # input messages
-        self.processed = 0         # frames the estimator finished
         self.published = 0         # frames whose estimate was published (poses and markers)
         self.camera_info_published = 0
         self.handoff_dropped = 0   # matched frames replaced in the hand-off before the estimator took them
         self.last_estimate = None  # the FocalEstimate of the newest processed frame
         self._proc_times: deque = deque(maxlen=200)
-        self._samples: deque = deque()  # (time, matched, processed, skipped) at each diagnostics message
+        self._rates = RateWindow(5.0)  # frame and estimator rates over the last 5 s, for diagnostics
         self._throttle = _Throttle(self.get_logger())
         self._lock = threading.Lock()
-        self._cv = threading.Condition(self._lock)
         self._pub_lock = threading.Lock()  # CameraInfo publication from the two threads
-        self._slot = None          # the newest complete frame, waiting for the estimator
-        self._busy_since = None
-        self._last_done = None
-        self._stop = False
-        self._generation = 0       # bumped by every reset: frames taken before it are discarded
+        # The one-slot hand-off to the estimator thread; its clear() on every reset discards the
+        # frames taken before it. Started once the node is complete.
+        self.worker = LatestSlotWorker(self._estimate_item, self._on_worker_error, now=lambda: self._now(),
+                                       name="fcop_estimator")
         self._size = None          # (width, height) of the frames in the window
         self._estimate: _Publishable | None = None
         self._history: deque = deque()  # the window's frames, light, to re-evaluate under new settings
@@ -299,39 +215,41 @@ class FcopNode(Node):
         self.set_info_client = (self.create_client(SetCameraInfo, self.p["set_camera_info_service"])
                                 if self.p["set_camera_info_service"] else None)
         self._diag_timer = self.create_timer(float(self.p["diagnostics_period"]), self.publish_diagnostics)
-        self._worker = threading.Thread(target=self._work, name="fcop_estimator", daemon=True)
-        self._worker.start()
+        self.worker.start()
         self.get_logger().info(
             f"fcop_node ready: inputs {[s.topic_name for s in self._subs]}, camera_info_in "
             f"{self.sub_info_in.topic_name}, sync {self.p['sync_mode']}, window {self.p['window_frames']} frames")
 
     # ----- parameters
     def _declare_parameters(self) -> None:
+        """Declare every parameter with its descriptor (rclpy refuses a wrong type or range, turned
+        into one ParameterError line), then check what descriptors cannot say."""
         overrides = getattr(self, "_parameter_overrides", {})
-        for name, (default, text, limits) in PARAMETERS.items():
+        for name, spec in PARAMETERS.items():
             given = overrides.get(name)
-            if given is not None and isinstance(default, float) and type(given.value) is int:
+            if given is not None and isinstance(spec.default, float) and type(given.value) is int:
                 overrides[name] = Parameter(name, value=float(given.value))  # focal_min:=300 means 300.0
             try:
-                self.declare_parameter(name, default, _descriptor(name, default, text, limits))
+                self.declare_parameter(name, spec.default, descriptor(name))
             except ParameterException:
                 value = overrides[name].value if name in overrides else "?"
                 raise ParameterError(f"parameter {name}={value!r} is not allowed: {allowed(name)}") from None
         self.p = {name: self.get_parameter(name).value for name in PARAMETERS}
         for name, value in self.p.items():
-            check_value(name, value)
+            check_words(name, value)
         problem = check_combination(self.p)
         if problem:
             raise ParameterError(problem)
 
     def _on_set_parameters(self, params) -> SetParametersResult:
+        """rclpy has applied the descriptors (type, range, read-only); refuse what they cannot
+        express (a choice among words, a text rule, rules between parameters), then apply."""
         new = dict(self.p)
         try:
             for prm in params:
                 if prm.name in PARAMETERS:
-                    if prm.name in READ_ONLY:
-                        raise ParameterError(f"parameter {prm.name} is read-only: set it at start-up")
-                    new[prm.name] = check_value(prm.name, prm.value)
+                    check_words(prm.name, prm.value)
+                    new[prm.name] = prm.value
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         problem = check_combination(new, self._size)
@@ -340,7 +258,7 @@ class FcopNode(Node):
         changed = {k for k in new if new[k] != self.p.get(k)}
         with self._lock:
             self.p = new
-            if changed & {"sync_mode", "sync_slop", "queue_size"}:
+            if changed & SYNC_PARAMETERS:
                 self.sync.configure(new["queue_size"], new["sync_slop"] if new["sync_mode"] == "approximate" else 0.0)
             if changed & set(WINDOW_PARAMETERS):
                 self._build_window(keep=True)
@@ -387,8 +305,7 @@ class FcopNode(Node):
         self.window.reset()
         self._history.clear()
         self._estimate = None
-        self._slot = None
-        self._generation += 1
+        self.worker.clear()
 
     # ----- intrinsics other than f: parameters, camera_info_in, image centre
     def _intrinsics(self, w: int, h: int):
@@ -441,14 +358,11 @@ class FcopNode(Node):
             if jumped:  # before the new frames reach the worker
                 self._reset_locked()
             for stamp_set, msgs in sets:
-                if self._slot is not None:
+                if self.worker.put((stamp_set, msgs)):
                     self.handoff_dropped += 1
                     self.rejected["estimator_busy"] += 1
                     self._throttle.warn("estimator_busy", "fcop_node: the estimator is slower than the input: "
                                                           "skipped a frame (it works on the newest one)")
-                self._slot = (stamp_set, msgs)
-            if sets:
-                self._cv.notify()
             for i, stamps, ref in outliers:
                 self.rejected[f"outlier_stamp_{INPUTS[i]}"] += len(stamps)
         for i, stamps, ref in outliers:
@@ -513,29 +427,19 @@ class FcopNode(Node):
         self._remember(self._answered, stamp)
         self._unanswered.pop(stamp, None)
         self._last_info_stamp = max(self._last_info_stamp, stamp)
-        self.last = (stamp, win, objects, info)
+        self._latest = LatestEstimate(stamp, float(info.k[0]), float(info.k[2]), float(info.k[5]), int(info.width),
+                                      int(info.height), getattr(win, "std_rel", None), int(win.support),
+                                      int(win.frames), tuple(objects))
 
     # ----- worker thread: conversions, estimation, poses
-    def _work(self) -> None:
-        while True:
-            with self._cv:
-                while self._slot is None and not self._stop:
-                    self._cv.wait(0.5)
-                if self._stop:
-                    return
-                (stamp, msgs), self._slot = self._slot, None
-                generation = self._generation
-                self._busy_since = self._now()
-            try:
-                self.process(stamp, msgs, generation)
-            except Exception as exc:  # the node must outlive any single bad frame
-                self._reject("exception")
-                self._throttle.warn("exception", f"fcop_node: frame {stamp} failed: {type(exc).__name__}: {exc}")
-            finally:
-                with self._lock:
-                    self._busy_since = None
-                    self._last_done = self._now()
-                    self.processed += 1
+    def _estimate_item(self, item, generation: int) -> None:
+        stamp, msgs = item
+        self.process(stamp, msgs, generation)
+
+    def _on_worker_error(self, item, exc: Exception) -> None:
+        """The node must outlive any single bad frame: count it and say which."""
+        self._reject("exception")
+        self._throttle.warn("exception", f"fcop_node: frame {item[0]} failed: {type(exc).__name__}: {exc}")
 
     def _reject(self, reason: str, n: int = 1) -> None:
         """Count dropped input; the worker and the executor thread both do, diagnostics reads."""
@@ -544,8 +448,31 @@ class FcopNode(Node):
 
     def idle(self) -> bool:
         """True when no frame is waiting or being estimated (used by replay and tests)."""
+        return self.worker.idle()
+
+    @property
+    def processed(self) -> int:
+        """Frames the estimator finished (failed ones included)."""
+        return self.worker.processed
+
+    @property
+    def latest(self) -> LatestEstimate | None:
+        """The last CameraInfo publication and the estimate behind it (None before the first)."""
+        with self._pub_lock:
+            return self._latest
+
+    @property
+    def window_estimate(self):
+        """The focal window's current WindowEstimate (whether or not within max_uncertainty)."""
         with self._lock:
-            return self._slot is None and self._busy_since is None
+            return self.window.current
+
+    @property
+    def counts(self) -> NodeCounts:
+        """The node's counters, read together."""
+        with self._lock:
+            return NodeCounts(self.received, self.sync.stats.matched, self.worker.processed, self.published,
+                              self.handoff_dropped, self.camera_info_published, dict(self.rejected))
 
     def process(self, stamp: int, msgs, generation: int | None = None) -> bool:
         """Estimate one synchronised frame, update the window and publish the frame's poses and
@@ -592,7 +519,7 @@ class FcopNode(Node):
                                                  "The focal length is unaffected; no pose is published for them")
         resized = None
         with self._lock:
-            if generation is not None and generation != self._generation:
+            if generation is not None and generation != self.worker.generation:
                 return False  # taken before a reset
             if self._size != (w, h):
                 resized, self._size = self._size, (w, h)
@@ -628,8 +555,8 @@ class FcopNode(Node):
                 self.pub_markers.publish(marker_array(objects, depth_msg.header, poses=poses))
         with self._pub_lock:
             self._last_objects = objects
-            if self.last is not None and self.last[0] == stamp:
-                self.last = (stamp, self.last[1], objects, self.last[3])
+            if self._latest is not None and self._latest.stamp_ns == stamp:
+                self._latest = dataclasses.replace(self._latest, objects=tuple(objects))
         with self._lock:
             self.published += 1
         return True
@@ -711,69 +638,23 @@ class FcopNode(Node):
 
     # ----- diagnostics
     def diagnostic_status(self) -> DiagnosticStatus:
-        """The node's status now (what publish_diagnostics sends)."""
+        """The node's status now (what publish_diagnostics sends); see :mod:`.diagnostics`."""
         now = self._now()
         with self._lock:  # the worker thread updates these while we read
-            win = self.window.current
-            est = self._estimate
-            fill = f"{len(self.window)}/{self.p['window_frames']}"
-            p = dict(self.p)
-            times = np.array(self._proc_times) * 1000 if self._proc_times else np.zeros(1)
-            rejected = dict(self.rejected)
-            warnings = dict(self.warnings)
-            matched, processed, skipped = self.sync.stats.matched, self.processed, self.handoff_dropped
-            busy_for = None if self._busy_since is None else now - self._busy_since
-            age = None if self._last_done is None else now - self._last_done
-            sync_dropped = self.sync.stats.dropped_total
-        self._samples.append((now, matched, processed, skipped))
-        while len(self._samples) > 1 and now - self._samples[1][0] >= 5.0:
-            self._samples.popleft()
-        t0, m0, p0, s0 = self._samples[0]
-        span = now - t0
-        rate = (matched - m0) / span if span > 0 else 0.0
-        est_rate = (processed - p0) / span if span > 0 else 0.0
-        std = getattr(win, "std_rel", None)
-        st = DiagnosticStatus()
-        st.name = f"{self.get_name()}: focal estimate"
-        st.hardware_id = self.get_fully_qualified_name()
-        if busy_for is not None and busy_for > p["max_estimate_age"]:
-            st.level = DiagnosticStatus.ERROR
-            st.message = (f"estimator stalled: busy with one frame for {busy_for:.1f} s (max_estimate_age "
-                          f"{p['max_estimate_age']} s); CameraInfo carries an estimate {age or 0:.1f} s old")
-        elif win.focal is None:
-            st.level, st.message = DiagnosticStatus.WARN, f"no focal estimate yet: {win.reason}"
-        elif est is None:
-            st.level = DiagnosticStatus.WARN
-            st.message = (f"focal {win.focal:.1f} px held back: std_rel "
-                          f"{'unknown' if std is None else f'{std:.4f}'} above max_uncertainty {p['max_uncertainty']}")
-        elif skipped - s0 > processed - p0:
-            st.level = DiagnosticStatus.WARN
-            st.message = (f"focal {win.focal:.1f} px; estimator behind: skipped {skipped - s0} of "
-                          f"{matched - m0} frames in the last {span:.1f} s")
-        else:
-            st.level, st.message = DiagnosticStatus.OK, f"focal {win.focal:.1f} px"
-        values = {
-            "focal_px": "" if win.focal is None else f"{win.focal:.3f}",
-            "std_rel": "" if std is None else f"{std:.5f}",
-            "max_uncertainty": str(p["max_uncertainty"]),
-            "support_votes": str(win.support),
-            "window_fill": fill,
-            "frame_rate_hz": f"{rate:.2f}",
-            "estimator_rate_hz": f"{est_rate:.2f}",
-            "estimate_age_s": "" if age is None else f"{age:.2f}",
-            "estimator_busy_s": "" if busy_for is None else f"{busy_for:.2f}",
-            "frames_processed": str(processed),
-            "frames_skipped": str(skipped),
-            "camera_info_published": str(self.camera_info_published),
-            "sync_matched": str(matched),
-            "sync_dropped": str(sync_dropped),
-            "processing_ms_median": f"{np.median(times):.2f}",
-            "processing_ms_max": f"{np.max(times):.2f}",
-        }
-        values.update({f"rejected_{k}": str(v) for k, v in sorted(rejected.items())})
-        values.update({f"warning_{k}": str(v) for k, v in sorted(warnings.items())})
-        st.values = [KeyValue(key=k, value=v) for k, v in values.items()]
-        return st
+            work = self.worker.state()
+            reading = DiagnosticsInput(
+                now=now, window=self.window.current, publishable=self._estimate is not None,
+                window_fill=f"{len(self.window)}/{self.p['window_frames']}",
+                max_uncertainty=self.p["max_uncertainty"], max_estimate_age=self.p["max_estimate_age"],
+                matched=self.sync.stats.matched, processed=work.processed, skipped=self.handoff_dropped,
+                sync_dropped=self.sync.stats.dropped_total, camera_info_published=self.camera_info_published,
+                busy_for=None if work.busy_since is None else now - work.busy_since,
+                age=None if work.last_done is None else now - work.last_done,
+                processing_ms=tuple(t * 1000 for t in self._proc_times),
+                rejected=dict(self.rejected), warnings=dict(self.warnings))
+        rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped)
+        return diagnostic_status(f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading,
+                                 rates)
 
     def publish_diagnostics(self) -> DiagnosticArray:
         msg = DiagnosticArray()
@@ -783,12 +664,8 @@ class FcopNode(Node):
         return msg
 
     def destroy_node(self):
-        if self._worker is not None:
-            with self._cv:
-                self._stop = True
-                self._cv.notify_all()
-            if self._worker.is_alive() and threading.current_thread() is not self._worker:
-                self._worker.join(timeout=5.0)
+        if self.worker is not None:
+            self.worker.stop(timeout=5.0)
         return super().destroy_node()
 
 

@@ -215,7 +215,7 @@ def parse_overrides(overrides) -> dict:
 def check_parameters(values: dict, where: dict) -> dict:
     """Check names, types, ranges and choices against fcop_node's declared parameters; return the
     values with integers given for double parameters made doubles. ``where`` names the source."""
-    from ..ros.node import PARAMETERS
+    from ..ros.params import PARAMETERS, check_combination, defaults
 
     known = sorted(PARAMETERS)
     out = {}
@@ -230,22 +230,19 @@ def check_parameters(values: dict, where: dict) -> dict:
             raise ReplayError(f"unknown parameter {name!r} from {src}{hint}; fcop_node's parameters: "
                               f"{', '.join(known)}")
         spec = PARAMETERS[name]
-        default = spec[0] if isinstance(spec, tuple) else spec
-        limits = spec[2] if isinstance(spec, tuple) and len(spec) > 2 else None
+        default = spec.default
         if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
         if type(value) is not type(default):
             raise ReplayError(f"parameter {name} from {src} must be {type(default).__name__}, got {value!r}")
-        if isinstance(limits, tuple) and len(limits) == 2 and isinstance(limits[0], (int, float)) \
-                and not isinstance(value, bool) and not limits[0] <= value <= limits[1]:
-            raise ReplayError(f"parameter {name}={value} from {src} is outside [{limits[0]}, {limits[1]}]")
-        if isinstance(limits, tuple) and limits and all(isinstance(c, str) for c in limits) \
-                and value not in limits:
-            raise ReplayError(f"parameter {name}={value!r} from {src} must be one of: {', '.join(limits)}")
+        lo, hi = spec.range or (None, None)
+        if spec.range is not None and not isinstance(value, bool) and not lo <= value <= hi:
+            raise ReplayError(f"parameter {name}={value} from {src} is outside [{lo}, {hi}]")
+        if spec.choices and value not in spec.choices:
+            raise ReplayError(f"parameter {name}={value!r} from {src} must be one of: {', '.join(spec.choices)}")
         out[name] = value
-    from ..ros.node import check_combination
 
-    full = {k: (v[0] if isinstance(v, tuple) else v) for k, v in PARAMETERS.items()}
+    full = defaults()
     full.update({k: v for k, v in out.items() if k in PARAMETERS})
     problem = check_combination(full)
     if problem:
@@ -456,9 +453,10 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
             deadline = time.monotonic() + limit
             while not cond():
                 if time.monotonic() > deadline:
+                    n = node.counts
                     raise ReplayError("the node did not answer in time (is the machine overloaded?) "
-                                      f"[received {node.received}/{sent}, matched {node.sync.stats.matched}, "
-                                      f"processed {node.processed}, published {node.published}, "
+                                      f"[received {n.received}/{sent}, matched {n.matched}, "
+                                      f"processed {n.processed}, published {n.published}, "
                                       f"outputs {[len(v) for v in got.values()]}]")
                 executor.spin_once(timeout_sec=0.01)
 
@@ -474,10 +472,15 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
 
         def drain():
             """Write what the node published for the frames handed over so far."""
-            spin_until(lambda: node.processed >= node.sync.stats.matched and node.idle())
-            wanted = [k for k, on in (("camera_info", True), ("object_poses", node.p["publish_poses"]),
-                                      ("object_markers", node.p["publish_markers"])) if on]
-            spin_until(lambda: all(consumed[k] + len(got[k]) >= node.published for k in wanted))
+            def caught_up():
+                n = node.counts
+                return n.processed >= n.matched and node.idle()
+
+            spin_until(caught_up)
+            publish = {"camera_info": True, "object_poses": node.get_parameter("publish_poses").value,
+                       "object_markers": node.get_parameter("publish_markers").value}
+            wanted = [k for k, on in publish.items() if on]
+            spin_until(lambda: all(consumed[k] + len(got[k]) >= node.counts.published for k in wanted))
             for key in outputs:
                 consumed[key] += len(got[key])
                 for raw in got[key]:
@@ -510,7 +513,7 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
                     checked.add(role)
                 pubs[topic].publish(raw)
                 sent += 1
-                spin_until(lambda: node.received >= sent)
+                spin_until(lambda: node.counts.received >= sent)
                 if role == "depth":
                     summary.frames_read += 1
                     if state["bar"] is not None:
@@ -539,7 +542,7 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
         if state["bar"] is not None:
             step(state["bar"].close)
         if state["node"] is not None:
-            summary.rejected = dict(state["node"].rejected)
+            summary.rejected = state["node"].counts.rejected
             step(state["node"].destroy_node)
         if state["feeder"] is not None:
             step(state["feeder"].destroy_node)
@@ -588,14 +591,17 @@ def replay(bag, depth_topic: str, nocs_topic: str, mask_topic: str, out_dir, *, 
 
 
 def _row(info, stamp, node) -> dict:
-    """One estimates.csv row from a published CameraInfo and the window estimate behind it."""
-    last = node.last
-    win = last[1] if last is not None and last[0] == stamp else node.window.current
-    objects = last[2] if last is not None and last[0] == stamp else []
-    std_rel = getattr(win, "std_rel", None)
+    """One estimates.csv row from a published CameraInfo and the window estimate behind it: the
+    node's latest publication when it is of this stamp, else the window's current estimate."""
+    latest = node.latest
+    if latest is not None and latest.stamp_ns == stamp:
+        std_rel, support, objects = latest.std_rel, latest.support, len(latest.objects)
+    else:
+        win = node.window_estimate
+        std_rel, support, objects = getattr(win, "std_rel", None), win.support, 0
     return {"stamp_ns": stamp, "focal": float(info.k[0]), "cx": float(info.k[2]), "cy": float(info.k[5]),
-            "support": int(win.support), "std_rel": float(std_rel) if std_rel is not None else None,
-            "objects": len(objects)}
+            "support": int(support), "std_rel": float(std_rel) if std_rel is not None else None,
+            "objects": objects}
 
 
 def write_report(path: Path, rows, summary: ReplaySummary) -> None:
