@@ -12,6 +12,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from fcop_ros.tools import make_bag as mb
+from fcop_ros.tools import estimates_csv, replay_offline, replay_play
 from fcop_ros.tools import replay as rp
 from fcop_ros.tools.bagio import BagSource, BagWriter
 from fcop_ros.synthetic import SequenceSpec
@@ -29,7 +30,7 @@ def tiny_bag(path, frames=6, storage="mcap", preset="mild", rate=30.0, zoom=None
 
 
 def run(bag, out, **kw):
-    return rp.replay(bag, mb.TOPICS["depth"], mb.TOPICS["nocs"], mb.TOPICS["mask"], out,
+    return replay_offline.replay(bag, mb.TOPICS["depth"], mb.TOPICS["nocs"], mb.TOPICS["mask"], out,
                      truth_topic=kw.pop("truth_topic", mb.TOPICS["truth"]), progress=False, **kw)
 
 
@@ -53,7 +54,7 @@ def test_replay_outputs(tmp_path, storage):
     stamps = [START + k * int(round(1e9 / 30)) for k in range(6)]
     assert s.frames_read == 6 and s.frames_estimated == 6 and not s.damaged
     rows = read_csv(tmp_path / "out" / "estimates.csv")
-    assert list(rows[0]) == rp.CSV_COLUMNS + ["focal_true", "focal_error_pct"]
+    assert list(rows[0]) == estimates_csv.CSV_COLUMNS + ["focal_true", "focal_error_pct"]
     assert [int(r["stamp_ns"]) for r in rows] == stamps
     for r in rows:
         # 160x120 frames carry little evidence: the truth within the reported +-3 std_rel.
@@ -205,7 +206,7 @@ def test_play_mode_timing_and_order(tmp_path):
             sub_node.create_subscription(Image, t, lambda m, t=t: got[t].append((stamp_ns(m), time.monotonic())), 50)
         ex.add_node(sub_node)
         result = {}
-        th = threading.Thread(target=lambda: result.setdefault("r", rp.play(bag, topics, rate=2.0, context=ctx)))
+        th = threading.Thread(target=lambda: result.setdefault("r", replay_play.play(bag, topics, rate=2.0, context=ctx)))
         th.start()
         assert spin_until(ex, lambda: all(len(v) == 6 for v in got.values()), 30)
         th.join(10)
@@ -258,7 +259,7 @@ def test_play_publishes_the_recorded_time_on_clock(tmp_path):
         ex.add_node(listener)
         ex.add_node(follower)
         result = {}
-        th = threading.Thread(target=lambda: result.setdefault("r", rp.play(bag, topics, rate=2.0, context=ctx,
+        th = threading.Thread(target=lambda: result.setdefault("r", replay_play.play(bag, topics, rate=2.0, context=ctx,
                                                                              clock_hz=50.0)))
         th.start()
         assert spin_until(ex, lambda: "r" in result and follower.get_clock().now().nanoseconds == stamps[-1]

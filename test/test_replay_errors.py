@@ -13,6 +13,7 @@ import pytest
 
 from fcop_ros.tools import make_bag as mb
 from fcop_ros.tools import replay as rp
+from fcop_ros.tools import estimates_csv, replay_params
 from fcop_ros.tools.bagio import BagSource
 from fcop_ros.ros.params import PARAMETERS
 from fcop_ros.synthetic import SequenceSpec
@@ -104,14 +105,14 @@ def test_params_file_sections_for_any_namespace(tmp_path):
                   "/camera/fcop_node:\n  ros__parameters:\n    window_frames: 7\n    seed: 5\n"
                   "/**:\n  ros__parameters:\n    window_frames: 9\n    min_support: 40\n    use_sim_time: false\n"
                   "robot:\n  arm:\n    fcop_node:\n      ros__parameters:\n        min_frames: 3\n")
-    assert rp.load_params_file(pf) == {"window_frames": 7, "min_support": 40, "use_sim_time": False,
+    assert replay_params.load_params_file(pf) == {"window_frames": 7, "min_support": 40, "use_sim_time": False,
                                        "seed": 5, "min_frames": 3}
-    params = rp.node_parameters(str(pf), ["seed:=11", "focal_min:=60", "noise_bound_mode:=absolute",
+    params = replay_params.node_parameters(str(pf), ["seed:=11", "focal_min:=60", "noise_bound_mode:=absolute",
                                           "noise_bound:=5"])
     assert params["seed"] == 11 and params["window_frames"] == 7
     assert params["focal_min"] == 60.0 and type(params["focal_min"]) is float  # an int for a double
     assert params["noise_bound"] == 5.0 and params["noise_bound_mode"] == "absolute"
-    assert rp.parse_value("1e3") == 1000.0 and rp.parse_value("true") is True and rp.parse_value("x") == "x"
+    assert replay_params.parse_value("1e3") == 1000.0 and replay_params.parse_value("true") is True and replay_params.parse_value("x") == "x"
 
 
 def test_out_is_a_file(bag, tmp_path, capsys):
@@ -172,7 +173,7 @@ def test_disk_full_midway_keeps_the_rows_before_and_says_what_was_lost(bag, tmp_
         fh = real_open(path, mode, *a, **kw)
         return _FullAfter(fh, 1 + 3) if Path(path).name == "estimates.csv" else fh
 
-    monkeypatch.setattr(rp, "open", open_on_small_disk, raising=False)
+    monkeypatch.setattr(estimates_csv, "open", open_on_small_disk, raising=False)
     out = tmp_path / "o"
     (out / "report.png").mkdir(parents=True)  # and the report cannot be written either
     assert rp.main(args(bag, out)) == 4
@@ -205,8 +206,8 @@ def test_subprocess_exit_codes_without_traceback(bag, tmp_path):
 def test_the_shipped_config_applies_to_the_replayed_node():
     """Whether config/fcop.yaml is keyed 'fcop_node:' or '/**:', replay finds every parameter in it."""
     from fcop_ros.ros.config import config_path
-    params = rp.node_parameters(None)
+    params = replay_params.node_parameters(None)
     assert set(PARAMETERS) <= set(params)
     for name, spec in PARAMETERS.items():
         assert params[name] == spec.default, name
-    assert rp.load_params_file(config_path()) == params
+    assert replay_params.load_params_file(config_path()) == params
