@@ -14,10 +14,12 @@ from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
-from msg_adapters import depth_to_image, mask_to_image, nocs_to_image, stamp_ns  # noqa: F401 (re-exported)
+from msg_adapters import depth_to_image, header_from_ns, mask_to_image, nocs_to_image, stamp_ns  # noqa: F401
+# (stamp_ns re-exported for the tests)
+
+FRAME_ID = "camera_optical_frame"
 
 
 @contextlib.contextmanager
@@ -43,16 +45,9 @@ def spin_until(executor, condition, timeout: float = 20.0, step: float = 0.02) -
     return bool(condition())
 
 
-def header(stamp_ns: int, frame_id: str = "camera_optical_frame") -> Header:
-    h = Header()
-    h.stamp.sec, h.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    h.frame_id = frame_id
-    return h
-
-
 def frame_messages(frame, stamp_ns: int, depth_encoding="32FC1", nocs_encoding="32FC3", mask_encoding="mono8"):
     """Depth, NOCS and mask Image messages of a rendered frame, all with the same header."""
-    h = header(stamp_ns)
+    h = header_from_ns(stamp_ns, FRAME_ID)
     return (depth_to_image(frame.depth, depth_encoding, h), nocs_to_image(frame.nocs, nocs_encoding, h),
             mask_to_image(frame.mask, mask_encoding, h))
 

@@ -15,7 +15,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from conftest import BAD_CASES, clean_frame, corrupted
 from fcop_ros.core.pose import rotation_angle_deg
-from ros_helpers import Gate, Recorder, frame_messages, harness, header, spin_until, stamp_ns  # noqa: F401
+from msg_adapters import header_from_ns
+from ros_helpers import Gate, Recorder, frame_messages, harness, spin_until, stamp_ns  # noqa: F401
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config", "fcop.yaml")
 T0 = 1_700_000_000_000_000_000
@@ -325,10 +326,10 @@ def test_only_the_mask_stamped_zero_is_named_and_never_resets(harness, capfd):
 def test_mismatched_and_empty_frame_ids_are_warned(harness, capfd):
     h = harness()
     d, n, m = frame_messages(clean_frame(4), T0)
-    n.header = header(T0, "nocs_frame")
+    n.header = header_from_ns(T0, "nocs_frame")
     assert h.frame((d, n, m))
     d, n, m = frame_messages(clean_frame(4), T0 + DT)
-    m.header = header(T0 + DT, "")
+    m.header = header_from_ns(T0 + DT, "")
     assert h.frame((d, n, m))
     assert h.node.warnings == {"frame_id_mismatch": 1, "frame_id_empty": 1}
     err = capfd.readouterr().err

@@ -13,7 +13,8 @@ from std_srvs.srv import Trigger
 
 from conftest import clean_frame, noisy_frame
 from fcop_ros.ros.params import PARAMETERS, READ_ONLY
-from ros_helpers import (Gate, Recorder, frame_messages, harness, header, rotation_errors,  # noqa: F401
+from msg_adapters import header_from_ns
+from ros_helpers import (FRAME_ID, Gate, Recorder, frame_messages, harness, rotation_errors,  # noqa: F401
                          spin_until, stamp_ns)
 
 BIN = os.path.dirname(sys.executable)
@@ -189,8 +190,8 @@ def check_principal_point_y(h):
 
 def _skewed(h, k, skew_ns):
     d, n, m = frame_messages(cam(0), T0 + k * DT)
-    n.header = header(T0 + k * DT + skew_ns)
-    m.header = header(T0 + k * DT + skew_ns)
+    n.header = header_from_ns(T0 + k * DT + skew_ns, FRAME_ID)
+    m.header = header_from_ns(T0 + k * DT + skew_ns, FRAME_ID)
     h.send((d, n, m))
     assert spin_until(h.ex, lambda: h.node.received == 3 * (k + 1), 10)
 

@@ -9,14 +9,13 @@ import pytest
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import Header
 
 from fcop_ros.tools import make_bag as mb
 from fcop_ros.tools import estimates_csv, replay_offline, replay_play
 from fcop_ros.tools import replay as rp
 from fcop_ros.tools.bagio import BagSource, BagWriter
 from fcop_ros.synthetic import SequenceSpec
-from msg_adapters import depth_to_image
+from msg_adapters import depth_to_image, header_from_ns, time_to_ns
 from ros_helpers import ros_context, spin_until, stamp_ns
 
 W, H, F = 160, 120, 150.0
@@ -135,7 +134,7 @@ def _bag_of(path, frames):
 
 
 def test_unsupported_encoding_and_no_matching_frames(tmp_path, capsys):
-    h = Header()
+    h = header_from_ns(0)
     img = depth_to_image(np.ones((8, 8)), "32FC1", h)
     bad = Image(header=h, height=8, width=8, encoding="mono8", step=8, data=bytes(64))
     bag = _bag_of(tmp_path / "bad", [(START, [("/d", bad), ("/n", img), ("/m", img)])])
@@ -146,8 +145,7 @@ def test_unsupported_encoding_and_no_matching_frames(tmp_path, capsys):
     from msg_adapters import mask_to_image, nocs_to_image
     frames = []
     for k in range(3):
-        ha, hb = Header(), Header()
-        ha.stamp.sec, hb.stamp.sec = 100 + k, 200 + k
+        ha, hb = header_from_ns((100 + k) * 10**9), header_from_ns((200 + k) * 10**9)
         frames.append((START + k, [("/d", depth_to_image(np.ones((8, 8)), "32FC1", ha)),
                                    ("/n", nocs_to_image(np.full((8, 8, 3), 0.5), "32FC3", ha)),
                                    ("/m", mask_to_image(np.ones((8, 8), int), "mono8", hb))]))
@@ -253,7 +251,7 @@ def test_play_publishes_the_recorded_time_on_clock(tmp_path):
     with ros_context() as (ctx, ex):
         listener = Node("clock_listener", context=ctx)
         events = []
-        listener.create_subscription(Clock, "/clock", lambda m: events.append(("clock", stamp_ns_of(m.clock))), 100)
+        listener.create_subscription(Clock, "/clock", lambda m: events.append(("clock", time_to_ns(m.clock))), 100)
         listener.create_subscription(Image, topics[0], lambda m: events.append(("depth", stamp_ns(m))), 100)
         follower = Node("sim_time_follower", context=ctx, parameter_overrides=[Parameter("use_sim_time", value=True)])
         ex.add_node(listener)
@@ -273,10 +271,6 @@ def test_play_publishes_the_recorded_time_on_clock(tmp_path):
         assert [t for kind, t in events if kind == "depth"] == stamps
         follower.destroy_node()
         listener.destroy_node()
-
-
-def stamp_ns_of(t):
-    return t.sec * 1_000_000_000 + t.nanosec
 
 
 def test_play_on_a_truncated_bag_reports_the_damage(tmp_path, capsys):

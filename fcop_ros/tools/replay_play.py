@@ -59,6 +59,8 @@ def play(
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Image
 
+    from msg_adapters import time_from_ns
+
     if not rate > 0:
         raise ReplayError("--rate must be > 0")
     if clock_hz < 0:
@@ -86,7 +88,7 @@ def play(
         if last_clock[0] is not None and ns <= last_clock[0]:
             return
         msg = Clock()
-        msg.clock.sec, msg.clock.nanosec = divmod(int(ns), 1_000_000_000)
+        msg.clock = time_from_ns(ns)
         clock_pub.publish(msg)
         last_clock[0] = ns
         result.clock += 1
