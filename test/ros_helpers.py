@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import contextlib
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -16,6 +15,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import MarkerArray
 
+from fcop_ros.ros.spin import spin_until  # noqa: F401 (re-exported for the tests)
 from msg_adapters import depth_to_image, header_from_ns, mask_to_image, nocs_to_image, stamp_ns  # noqa: F401
 # (stamp_ns re-exported for the tests)
 
@@ -33,16 +33,6 @@ def ros_context(args=None):
     finally:
         executor.shutdown(timeout_sec=1.0)
         ctx.try_shutdown()
-
-
-def spin_until(executor, condition, timeout: float = 20.0, step: float = 0.02) -> bool:
-    """Spin until ``condition()`` holds or the deadline passes; return whether it holds."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        executor.spin_once(timeout_sec=step)
-    return bool(condition())
 
 
 def frame_messages(frame, stamp_ns: int, depth_encoding="32FC1", nocs_encoding="32FC3", mask_encoding="mono8"):

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from ..ros.dds import use_large_image_profile
+from ..ros.spin import spin_until as spin
 from .bagio import BagError, BagSource, BagWriter
 from .estimates_csv import EstimatesCsv
 from .replay_base import (
@@ -173,17 +174,15 @@ def replay(
         executor.add_node(feeder)
 
         def spin_until(cond, limit=timeout):
-            deadline = time.monotonic() + limit
-            while not cond():
-                if time.monotonic() > deadline:
-                    n = node.counts
-                    raise ReplayError(
-                        "the node did not answer in time (is the machine overloaded?) "
-                        f"[received {n.received}/{sent}, matched {n.matched}, "
-                        f"processed {n.processed}, published {n.published}, "
-                        f"outputs {[len(v) for v in got.values()]}]"
-                    )
-                executor.spin_once(timeout_sec=0.01)
+            """Spin until ``cond()`` holds; ReplayError with the node's counts after ``limit`` s."""
+            if not spin(executor, cond, limit, step=0.01):
+                n = node.counts
+                raise ReplayError(
+                    "the node did not answer in time (is the machine overloaded?) "
+                    f"[received {n.received}/{sent}, matched {n.matched}, "
+                    f"processed {n.processed}, published {n.published}, "
+                    f"outputs {[len(v) for v in got.values()]}]"
+                )
 
         if progress if progress is not None else sys.stderr.isatty():
             from tqdm import tqdm
