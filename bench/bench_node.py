@@ -42,8 +42,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.cores:
         os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[: args.cores]))
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    os.environ.setdefault("ROS_DOMAIN_ID", str(50 + os.getpid() % 150))
+    from fcop_ros.ros.dds import keep_on_this_machine
+    keep_on_this_machine()
     from geometry_msgs.msg import PoseArray
     from rclpy.node import Node
     from rclpy.qos import qos_profile_sensor_data

@@ -259,3 +259,16 @@ def test_rate_window_spans_back_to_the_newest_reading_at_least_five_seconds_old(
     assert r.span == 6.0 and r.frame_hz == 30.0 and r.estimator_hz == 20.0 and r.skipped == 60
     r = rw.add(9.0, 360, 150, 60)  # now 3 s is: the reading at 0 s is forgotten
     assert r.span == 6.0 and r.matched == 270 and r.processed == 90 and r.skipped == 30
+
+
+# ----- the DDS environment
+
+
+def test_keep_on_this_machine_sets_only_what_is_unset():
+    from fcop_ros.ros.dds import keep_on_this_machine, profile_env_vars, use_large_image_profile
+
+    env = keep_on_this_machine({"ROS_DOMAIN_ID": "7"}, domain_id=99)
+    assert env["ROS_DOMAIN_ID"] == "7" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    assert keep_on_this_machine({}, domain_id=99)["ROS_DOMAIN_ID"] == "99"
+    env = use_large_image_profile({})
+    assert set(env) == set(profile_env_vars()) and all(v.endswith(".xml") for v in env.values())
