@@ -272,3 +272,22 @@ def test_keep_on_this_machine_sets_only_what_is_unset():
     assert keep_on_this_machine({}, domain_id=99)["ROS_DOMAIN_ID"] == "99"
     env = use_large_image_profile({})
     assert set(env) == set(profile_env_vars()) and all(v.endswith(".xml") for v in env.values())
+
+
+# ----- the calibration file
+
+
+def test_calibration_file_round_trips_through_yaml(tmp_path):
+    import yaml
+
+    from fcop_ros.ros.calibration import write_calibration
+    from msg_adapters import camera_info
+
+    info = camera_info(612.5, 319.5, 239.5, 640, 480)
+    path = tmp_path / "deep" / "cam.yaml"
+    write_calibration(str(path), info, "front")
+    doc = yaml.safe_load(path.read_text())
+    assert doc["camera_name"] == "front" and (doc["image_width"], doc["image_height"]) == (640, 480)
+    assert doc["camera_matrix"]["data"] == [612.5, 0.0, 319.5, 0.0, 612.5, 239.5, 0.0, 0.0, 1.0]
+    assert doc["distortion_model"] == "plumb_bob" and len(doc["projection_matrix"]["data"]) == 12
+    assert [p.name for p in path.parent.iterdir()] == ["cam.yaml"]  # no temporary file left

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
-import math
 import os
 import sys
 import threading
@@ -41,10 +40,12 @@ from msg_adapters import (ImageFormatError, camera_info, depth_from_image, marke
 
 from ..core import FocalWindow, estimate_focal
 from ..core.camera import image_centre
+from .calibration import default_calibration_path, write_calibration
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
 from .params import (PARAMETERS, SYNC_PARAMETERS, WINDOW_PARAMETERS, ParameterError, allowed, check_combination,
                      check_words, descriptor)
 from .sync import StampSynchronizer
+from .throttle import LogThrottle
 from .worker import LatestSlotWorker
 
 INPUTS = ("depth", "nocs", "mask")
@@ -85,35 +86,6 @@ class NodeCounts:
     rejected: dict
 
 
-class _Throttle:
-    """At most one log line per reason every ``period`` seconds, with the count since the last."""
-
-    def __init__(self, logger, period: float = 5.0):
-        self.logger, self.period = logger, period
-        self._last: dict[str, float] = {}
-        self._since: Counter = Counter()
-        self._lock = threading.Lock()
-
-    def _due(self, reason: str):
-        with self._lock:
-            self._since[reason] += 1
-            now = time.monotonic()
-            if now - self._last.get(reason, -math.inf) >= self.period:
-                self._last[reason] = now
-                return self._since.pop(reason)
-        return 0
-
-    def warn(self, reason: str, text: str) -> None:
-        n = self._due(reason)
-        if n:
-            self.logger.warning(f"{text}" + (f" ({n} such since the last report)" if n > 1 else ""))
-
-    def info(self, reason: str, text: str) -> None:
-        n = self._due(reason)
-        if n:
-            self.logger.info(f"{text}" + (f" ({n} such since the last report)" if n > 1 else ""))
-
-
 class _Reject(Exception):
     def __init__(self, reason: str, text: str):
         super().__init__(text)
@@ -135,17 +107,6 @@ def _light(est):
     names = {f.name for f in dataclasses.fields(est)}
     heavy = {"instances": [], "inlier_masks": None, "votes": np.zeros(0), "objects": []}
     return dataclasses.replace(est, **{k: v for k, v in heavy.items() if k in names})
-
-
-def calibration_yaml(info: CameraInfo, camera_name: str) -> str:
-    """CameraInfo in the camera_calibration_parsers YAML format (what camera_info_manager loads)."""
-    def mat(rows, cols, data):
-        values = ", ".join(repr(float(v)) for v in data)
-        return f"\n  rows: {rows}\n  cols: {cols}\n  data: [{values}]"
-    return (f"image_width: {int(info.width)}\nimage_height: {int(info.height)}\ncamera_name: {camera_name}\n"
-            f"camera_matrix:{mat(3, 3, info.k)}\ndistortion_model: {info.distortion_model}\n"
-            f"distortion_coefficients:{mat(1, len(info.d), info.d)}\n"
-            f"rectification_matrix:{mat(3, 3, info.r)}\nprojection_matrix:{mat(3, 4, info.p)}\n")
 
 
 class FcopNode(Node):
@@ -172,7 +133,7 @@ class FcopNode(Node):
         self.last_estimate = None  # the FocalEstimate of the newest processed frame
         self._proc_times: deque = deque(maxlen=200)
         self._rates = RateWindow(5.0)  # frame and estimator rates over the last 5 s, for diagnostics
-        self._throttle = _Throttle(self.get_logger())
+        self._throttle = LogThrottle(self.get_logger())
         self._lock = threading.Lock()
         self._pub_lock = threading.Lock()  # CameraInfo publication from the two threads
         # The one-slot hand-off to the estimator thread; its clear() on every reset discards the
@@ -581,8 +542,10 @@ class FcopNode(Node):
         return response
 
     def calibration_path(self) -> str:
-        path = self.p["calibration_file"] or os.path.join("~", ".ros", "camera_info", f"{self.p['camera_name']}.yaml")
-        return os.path.expanduser(path)
+        """Where ~/save_calibration writes: calibration_file, else camera_info_manager's default."""
+        if self.p["calibration_file"]:
+            return os.path.expanduser(self.p["calibration_file"])
+        return default_calibration_path(self.p["camera_name"])
 
     def _on_save_calibration(self, request, response):
         with self._lock:
@@ -607,11 +570,7 @@ class FcopNode(Node):
             return response
         path = self.calibration_path()
         try:
-            os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-            tmp = f"{path}.tmp{os.getpid()}"
-            with open(tmp, "w") as fh:
-                fh.write(calibration_yaml(info, p["camera_name"]))
-            os.replace(tmp, path)
+            write_calibration(path, info, p["camera_name"])
         except OSError as exc:
             response.message = f"cannot write {path}: {exc.strerror or exc}"
             self.get_logger().error(f"fcop_node: calibration not saved: {response.message}")
