@@ -16,8 +16,8 @@ from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import MarkerArray
 
 from fcop_ros.ros.spin import spin_until  # noqa: F401 (re-exported for the tests)
-from msg_adapters import depth_to_image, header_from_ns, mask_to_image, nocs_to_image, stamp_ns  # noqa: F401
-# (stamp_ns re-exported for the tests)
+from msg_adapters import (  # noqa: F401 (stamp_ns re-exported for the tests)
+    depth_to_image, header_from_ns, mask_to_image, nocs_to_image, stamp_ns)
 
 FRAME_ID = "camera_optical_frame"
 

@@ -128,8 +128,9 @@ def test_runtime_parameter_changes(harness):
     assert all(r.successful for r in ok)
     assert node.window.max_frames == 10 and node.sync.slop_ns == 20_000_000
     # Type and range: the descriptors, which rclpy applies before the node's callback runs.
-    for name, value, reason in (("window_frames", 0, "out of range"), ("queue_size", "five", "Wrong parameter type"),
-                                ("focal_min", 0.5, "out of range")):
+    refused = (("window_frames", 0, "out of range"), ("focal_min", 0.5, "out of range"),
+               ("queue_size", "five", "Wrong parameter type"))
+    for name, value, reason in refused:
         res = node.set_parameters([Parameter(name, value=value)])[0]
         assert not res.successful and reason in res.reason, (name, res.reason)
     # What a descriptor cannot say, the node's own check, called as rclpy calls it.
@@ -164,7 +165,7 @@ def test_latest_is_the_last_camera_info_and_the_estimate_behind_it(harness):
     # estimated: it carries the window of then (frame 1), which has since moved on.
     assert 1 <= latest.frames <= win.frames == 2 and 0 < latest.support <= win.support
     assert latest.std_rel is not None
-    assert len(latest.objects) == len(h.poses.msgs[-1].poses) > 0  # this stamp's frame is processed
+    assert len(latest.objects) == len(h.poses.msgs[-1].poses) > 0  # this stamp's frame is done
     with pytest.raises(AttributeError):
         latest.focal = 1.0  # a frozen snapshot: the node cannot change it under the reader
     n = h.node.counts
@@ -354,7 +355,8 @@ def test_every_depth_image_gets_one_camera_info_while_the_estimator_is_stuck(har
         assert h.frame(frame_messages(cam(0), T0))
         gate.close()
         h.send(frame_messages(cam(1), T0 + DT))
-        assert spin_until(h.ex, lambda: h.node.worker.busy_since is not None, 10)  # the estimator holds frame 1
+        # The estimator holds frame 1.
+        assert spin_until(h.ex, lambda: h.node.worker.busy_since is not None, 10)
         for k in range(2, 10):
             h.send(frame_messages(cam(k), T0 + k * DT))
             # Published while the estimator cannot finish anything: publishing does not wait for it.

@@ -14,8 +14,8 @@ from std_srvs.srv import Trigger
 from conftest import clean_frame, noisy_frame
 from fcop_ros.ros.params import PARAMETERS, READ_ONLY
 from msg_adapters import header_from_ns
-from ros_helpers import (FRAME_ID, Gate, Recorder, frame_messages, harness, rotation_errors,  # noqa: F401
-                         spin_until, stamp_ns)
+from ros_helpers import (  # noqa: F401
+    FRAME_ID, Gate, Recorder, frame_messages, harness, rotation_errors, spin_until, stamp_ns)
 
 BIN = os.path.dirname(sys.executable)
 T0 = 1_700_000_000_000_000_000
@@ -342,7 +342,7 @@ def test_read_only_parameters_are_refused_at_run_time(harness, name):
     d = h.node.describe_parameter(name)
     assert d.read_only
     value = {"seed": 5, "set_camera_info_service": "/x/set_camera_info"}[name]
-    res = h.node.set_parameters([Parameter(name, value=value)])[0]  # rclpy refuses it by the descriptor
+    res = h.node.set_parameters([Parameter(name, value=value)])[0]  # the descriptor: rclpy refuses
     assert not res.successful and "read-only" in res.reason and name in res.reason
     assert h.node.p[name] == PARAMETERS[name].default
 

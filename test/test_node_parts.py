@@ -287,7 +287,10 @@ def test_calibration_file_round_trips_through_yaml(tmp_path):
     path = tmp_path / "deep" / "cam.yaml"
     write_calibration(str(path), info, "front")
     doc = yaml.safe_load(path.read_text())
-    assert doc["camera_name"] == "front" and (doc["image_width"], doc["image_height"]) == (640, 480)
+    assert doc["camera_name"] == "front" and (doc["image_width"], doc["image_height"]) == (
+        640,
+        480,
+    )
     assert doc["camera_matrix"]["data"] == [612.5, 0.0, 319.5, 0.0, 612.5, 239.5, 0.0, 0.0, 1.0]
     assert doc["distortion_model"] == "plumb_bob" and len(doc["projection_matrix"]["data"]) == 12
     assert [p.name for p in path.parent.iterdir()] == ["cam.yaml"]  # no temporary file left

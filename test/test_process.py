@@ -121,7 +121,8 @@ def test_colcon_build_gives_the_ros2_run_layout(tmp_path):
     script = ("source install/setup.bash && "
               f"prefix=$({sys.executable} -c 'from ament_index_python.packages import get_package_prefix as g; "
               "print(g(\"fcop_ros\"))') && "
-              f"{sys.executable} -c 'from fcop_ros.ros.config import config_path; print(config_path())' && "
+              f"{sys.executable} -c 'from fcop_ros.ros.config import config_path; "
+              "print(config_path())' && "
               "exec $prefix/lib/fcop_ros/fcop_node --ros-args -r __node:=fcop_colcon "
               "--params-file $prefix/share/fcop_ros/config/fcop.yaml")
     proc = subprocess.Popen(["bash", "-c", script], cwd=ws, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

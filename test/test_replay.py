@@ -29,8 +29,10 @@ def tiny_bag(path, frames=6, storage="mcap", preset="mild", rate=30.0, zoom=None
 
 
 def run(bag, out, **kw):
-    return replay_offline.replay(bag, mb.TOPICS["depth"], mb.TOPICS["nocs"], mb.TOPICS["mask"], out,
-                     truth_topic=kw.pop("truth_topic", mb.TOPICS["truth"]), progress=False, **kw)
+    t = mb.TOPICS
+    return replay_offline.replay(bag, t["depth"], t["nocs"], t["mask"], out,
+                                 truth_topic=kw.pop("truth_topic", t["truth"]), progress=False,
+                                 **kw)
 
 
 def read_csv(path):
@@ -204,7 +206,8 @@ def test_play_mode_timing_and_order(tmp_path):
             sub_node.create_subscription(Image, t, lambda m, t=t: got[t].append((stamp_ns(m), time.monotonic())), 50)
         ex.add_node(sub_node)
         result = {}
-        th = threading.Thread(target=lambda: result.setdefault("r", replay_play.play(bag, topics, rate=2.0, context=ctx)))
+        th = threading.Thread(target=lambda: result.setdefault(
+            "r", replay_play.play(bag, topics, rate=2.0, context=ctx)))
         th.start()
         assert spin_until(ex, lambda: all(len(v) == 6 for v in got.values()), 30)
         th.join(10)
@@ -251,14 +254,15 @@ def test_play_publishes_the_recorded_time_on_clock(tmp_path):
     with ros_context() as (ctx, ex):
         listener = Node("clock_listener", context=ctx)
         events = []
-        listener.create_subscription(Clock, "/clock", lambda m: events.append(("clock", time_to_ns(m.clock))), 100)
+        listener.create_subscription(
+            Clock, "/clock", lambda m: events.append(("clock", time_to_ns(m.clock))), 100)
         listener.create_subscription(Image, topics[0], lambda m: events.append(("depth", stamp_ns(m))), 100)
         follower = Node("sim_time_follower", context=ctx, parameter_overrides=[Parameter("use_sim_time", value=True)])
         ex.add_node(listener)
         ex.add_node(follower)
         result = {}
-        th = threading.Thread(target=lambda: result.setdefault("r", replay_play.play(bag, topics, rate=2.0, context=ctx,
-                                                                             clock_hz=50.0)))
+        th = threading.Thread(target=lambda: result.setdefault(
+            "r", replay_play.play(bag, topics, rate=2.0, context=ctx, clock_hz=50.0)))
         th.start()
         assert spin_until(ex, lambda: "r" in result and follower.get_clock().now().nanoseconds == stamps[-1]
                           and sum(e[0] == "depth" for e in events) == 5, 30)

@@ -105,14 +105,15 @@ def test_params_file_sections_for_any_namespace(tmp_path):
                   "/camera/fcop_node:\n  ros__parameters:\n    window_frames: 7\n    seed: 5\n"
                   "/**:\n  ros__parameters:\n    window_frames: 9\n    min_support: 40\n    use_sim_time: false\n"
                   "robot:\n  arm:\n    fcop_node:\n      ros__parameters:\n        min_frames: 3\n")
-    assert replay_params.load_params_file(pf) == {"window_frames": 7, "min_support": 40, "use_sim_time": False,
-                                       "seed": 5, "min_frames": 3}
-    params = replay_params.node_parameters(str(pf), ["seed:=11", "focal_min:=60", "noise_bound_mode:=absolute",
-                                          "noise_bound:=5"])
+    assert replay_params.load_params_file(pf) == {
+        "window_frames": 7, "min_support": 40, "use_sim_time": False, "seed": 5, "min_frames": 3}
+    params = replay_params.node_parameters(
+        str(pf), ["seed:=11", "focal_min:=60", "noise_bound_mode:=absolute", "noise_bound:=5"])
     assert params["seed"] == 11 and params["window_frames"] == 7
     assert params["focal_min"] == 60.0 and type(params["focal_min"]) is float  # an int for a double
     assert params["noise_bound"] == 5.0 and params["noise_bound_mode"] == "absolute"
-    assert replay_params.parse_value("1e3") == 1000.0 and replay_params.parse_value("true") is True and replay_params.parse_value("x") == "x"
+    parse = replay_params.parse_value
+    assert parse("1e3") == 1000.0 and parse("true") is True and parse("x") == "x"
 
 
 def test_out_is_a_file(bag, tmp_path, capsys):

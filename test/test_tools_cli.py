@@ -49,8 +49,8 @@ def test_make_bag_shows_progress_on_a_terminal(tmp_path):
     import termios
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 30, 100, 0, 0))  # a 100-column terminal
-    proc = subprocess.Popen([sys.executable, "-m", "fcop_ros.tools.make_bag", str(tmp_path / "b"), "--frames", "3",
-                             "--width", "64", "--height", "48", "--objects", "2"],
+    proc = subprocess.Popen([sys.executable, "-m", "fcop_ros.tools.make_bag", str(tmp_path / "b"),
+                             "--frames", "3", "--width", "64", "--height", "48", "--objects", "2"],
                             stdout=subprocess.PIPE, stderr=slave, cwd=ROOT)
     os.close(slave)
     chunks = []

@@ -1,5 +1,6 @@
 """The Fast DDS set-up in one place: the shipped profile (large images across processes), how to
 point at it, and how to keep a run's DDS traffic on this machine and out of other runs' way."""
+
 from __future__ import annotations
 
 import os
@@ -54,5 +55,7 @@ def keep_on_this_machine(env=None, domain_id: int | None = None) -> dict:
     # Jazzy still honours the deprecated ROS_LOCALHOST_ONLY, ahead of the discovery range, and
     # then replaces the transports of the Fast DDS profile by UDP on loopback: 640x480 images
     # sent best effort across processes got lost again (seen in CI). So it is not set from Jazzy.
-    env.setdefault("ROS_DOMAIN_ID", str(50 + os.getpid() % 150 if domain_id is None else domain_id))
+    env.setdefault(
+        "ROS_DOMAIN_ID", str(50 + os.getpid() % 150 if domain_id is None else domain_id)
+    )
     return env

@@ -8,6 +8,7 @@ newest complete frame whenever it is free, estimates it, updates the sliding win
 it the estimate the next depth images carry) and publishes that frame's poses and markers. So
 publishing never waits for the estimator, and the estimator never works on a backlog.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -21,29 +22,52 @@ from dataclasses import dataclass
 
 import numpy as np
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.exceptions import ParameterException
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
-from msg_adapters import (ImageFormatError, camera_info, depth_from_image, marker_array, mask_from_image,
-                          nocs_from_image, object_poses, pose_array, stamp_ns)
+from msg_adapters import (
+    ImageFormatError,
+    camera_info,
+    depth_from_image,
+    marker_array,
+    mask_from_image,
+    nocs_from_image,
+    object_poses,
+    pose_array,
+    stamp_ns,
+)
 
 from ..core import FocalWindow, estimate_focal
 from ..core.camera import image_centre
 from .calibration import default_calibration_path, write_calibration
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
-from .params import (PARAMETERS, SYNC_PARAMETERS, WINDOW_PARAMETERS, ParameterError, allowed, check_combination,
-                     check_words, descriptor)
+from .params import (
+    PARAMETERS,
+    SYNC_PARAMETERS,
+    WINDOW_PARAMETERS,
+    ParameterError,
+    allowed,
+    check_combination,
+    check_words,
+    descriptor,
+)
 from .sync import StampSynchronizer
 from .throttle import LogThrottle
 from .worker import LatestSlotWorker
@@ -94,7 +118,9 @@ class _Reject(Exception):
 
 @dataclasses.dataclass
 class _Publishable:
-    """The estimate depth images get their CameraInfo from: the window's, when within max_uncertainty."""
+    """The estimate depth images get their CameraInfo from: the window's, when within
+    max_uncertainty."""
+
     focal: float
     std_rel: float
     width: int
@@ -123,29 +149,41 @@ class FcopNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._now = time.monotonic  # the clock of rates and ages; replaceable in tests
-        self.rejected: Counter = Counter()   # dropped input, by reason
-        self.warnings: Counter = Counter()   # accepted input that deserved a word, by reason
+        self.rejected: Counter = Counter()  # dropped input, by reason
+        self.warnings: Counter = Counter()  # accepted input that deserved a word, by reason
         self._latest: LatestEstimate | None = None  # the last CameraInfo publication (see latest)
-        self.received = 0          # input messages
-        self.published = 0         # frames whose estimate was published (poses and markers)
+        self.received = 0  # input messages
+        self.published = 0  # frames whose estimate was published (poses and markers)
         self.camera_info_published = 0
-        self.handoff_dropped = 0   # matched frames replaced in the hand-off before the estimator took them
+        self.handoff_dropped = (
+            0  # matched frames replaced in the hand-off before the estimator took them
+        )
         self.last_estimate = None  # the FocalEstimate of the newest processed frame
         self._proc_times: deque = deque(maxlen=200)
-        self._rates = RateWindow(5.0)  # frame and estimator rates over the last 5 s, for diagnostics
+        self._rates = RateWindow(
+            5.0
+        )  # frame and estimator rates over the last 5 s, for diagnostics
         self._throttle = LogThrottle(self.get_logger())
         self._lock = threading.Lock()
         self._pub_lock = threading.Lock()  # CameraInfo publication from the two threads
         # The one-slot hand-off to the estimator thread; its clear() on every reset discards the
         # frames taken before it. Started once the node is complete.
-        self.worker = LatestSlotWorker(self._estimate_item, self._on_worker_error, now=lambda: self._now(),
-                                       name="fcop_estimator")
-        self._size = None          # (width, height) of the frames in the window
+        self.worker = LatestSlotWorker(
+            self._estimate_item,
+            self._on_worker_error,
+            now=lambda: self._now(),
+            name="fcop_estimator",
+        )
+        self._size = None  # (width, height) of the frames in the window
         self._estimate: _Publishable | None = None
-        self._history: deque = deque()  # the window's frames, light, to re-evaluate under new settings
+        self._history: deque = (
+            deque()
+        )  # the window's frames, light, to re-evaluate under new settings
         self._last_objects: list = []
         self._answered: OrderedDict = OrderedDict()  # depth stamps that got their CameraInfo
-        self._unanswered: OrderedDict = OrderedDict()  # depth stamps that arrived without an estimate
+        self._unanswered: OrderedDict = (
+            OrderedDict()
+        )  # depth stamps that arrived without an estimate
         self._last_info_stamp = -1
         self._cam_in: CameraInfo | None = None
         self._warned_distortion = False
@@ -155,31 +193,60 @@ class FcopNode(Node):
 
         qos_in = QoSOverridingOptions.with_default_policies()
         self._subs = [
-            self.create_subscription(Image, name, lambda msg, i=i: self._on_image(i, msg), qos_profile_sensor_data,
-                                     qos_overriding_options=qos_in)
+            self.create_subscription(
+                Image,
+                name,
+                lambda msg, i=i: self._on_image(i, msg),
+                qos_profile_sensor_data,
+                qos_overriding_options=qos_in,
+            )
             for i, name in enumerate(INPUTS)
         ]
-        self.sub_info_in = self.create_subscription(CameraInfo, "camera_info_in", self._on_camera_info_in,
-                                                    qos_profile_sensor_data, qos_overriding_options=qos_in)
+        self.sub_info_in = self.create_subscription(
+            CameraInfo,
+            "camera_info_in",
+            self._on_camera_info_in,
+            qos_profile_sensor_data,
+            qos_overriding_options=qos_in,
+        )
         qos_out = QoSOverridingOptions.with_default_policies()
         # Reliable, volatile, keep last 10, spelled out: the "system default" profile leaves the
         # durability to the RMW, and Fast DDS then makes the writer transient local.
-        out = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.VOLATILE)
-        self.pub_info = self.create_publisher(CameraInfo, "camera_info", out, qos_overriding_options=qos_out)
-        self.pub_poses = self.create_publisher(PoseArray, "object_poses", out, qos_overriding_options=qos_out)
-        self.pub_markers = self.create_publisher(MarkerArray, "object_markers", out, qos_overriding_options=qos_out)
+        out = QoSProfile(
+            depth=10,
+            history=HistoryPolicy.KEEP_LAST,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.VOLATILE,
+        )
+        self.pub_info = self.create_publisher(
+            CameraInfo, "camera_info", out, qos_overriding_options=qos_out
+        )
+        self.pub_poses = self.create_publisher(
+            PoseArray, "object_poses", out, qos_overriding_options=qos_out
+        )
+        self.pub_markers = self.create_publisher(
+            MarkerArray, "object_markers", out, qos_overriding_options=qos_out
+        )
         self.pub_latest = self._latched_publisher()
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.srv_reset = self.create_service(Trigger, "~/reset", self._on_reset)
-        self.srv_save = self.create_service(Trigger, "~/save_calibration", self._on_save_calibration)
-        self.set_info_client = (self.create_client(SetCameraInfo, self.p["set_camera_info_service"])
-                                if self.p["set_camera_info_service"] else None)
-        self._diag_timer = self.create_timer(float(self.p["diagnostics_period"]), self.publish_diagnostics)
+        self.srv_save = self.create_service(
+            Trigger, "~/save_calibration", self._on_save_calibration
+        )
+        self.set_info_client = (
+            self.create_client(SetCameraInfo, self.p["set_camera_info_service"])
+            if self.p["set_camera_info_service"]
+            else None
+        )
+        self._diag_timer = self.create_timer(
+            float(self.p["diagnostics_period"]), self.publish_diagnostics
+        )
         self.worker.start()
         self.get_logger().info(
             f"fcop_node ready: inputs {[s.topic_name for s in self._subs]}, camera_info_in "
-            f"{self.sub_info_in.topic_name}, sync {self.p['sync_mode']}, window {self.p['window_frames']} frames")
+            f"{self.sub_info_in.topic_name}, sync {self.p['sync_mode']}, "
+            f"window {self.p['window_frames']} frames"
+        )
 
     # ----- parameters
     def _declare_parameters(self) -> None:
@@ -189,12 +256,16 @@ class FcopNode(Node):
         for name, spec in PARAMETERS.items():
             given = overrides.get(name)
             if given is not None and isinstance(spec.default, float) and type(given.value) is int:
-                overrides[name] = Parameter(name, value=float(given.value))  # focal_min:=300 means 300.0
+                overrides[name] = Parameter(
+                    name, value=float(given.value)
+                )  # focal_min:=300 means 300.0
             try:
                 self.declare_parameter(name, spec.default, descriptor(name))
             except ParameterException:
                 value = overrides[name].value if name in overrides else "?"
-                raise ParameterError(f"parameter {name}={value!r} is not allowed: {allowed(name)}") from None
+                raise ParameterError(
+                    f"parameter {name}={value!r} is not allowed: {allowed(name)}"
+                ) from None
         self.p = {name: self.get_parameter(name).value for name in PARAMETERS}
         for name, value in self.p.items():
             check_words(name, value)
@@ -220,14 +291,19 @@ class FcopNode(Node):
         with self._lock:
             self.p = new
             if changed & SYNC_PARAMETERS:
-                self.sync.configure(new["queue_size"], new["sync_slop"] if new["sync_mode"] == "approximate" else 0.0)
+                self.sync.configure(
+                    new["queue_size"],
+                    new["sync_slop"] if new["sync_mode"] == "approximate" else 0.0,
+                )
             if changed & set(WINDOW_PARAMETERS):
                 self._build_window(keep=True)
             elif changed & {"max_uncertainty"}:
                 self._update_estimate_locked(self.window.current)
         if "diagnostics_period" in changed:
             self.destroy_timer(self._diag_timer)
-            self._diag_timer = self.create_timer(float(new["diagnostics_period"]), self.publish_diagnostics)
+            self._diag_timer = self.create_timer(
+                float(new["diagnostics_period"]), self.publish_diagnostics
+            )
         return SetParametersResult(successful=True)
 
     def _new_sync(self) -> StampSynchronizer:
@@ -235,11 +311,17 @@ class FcopNode(Node):
         return StampSynchronizer(len(INPUTS), self.p["queue_size"], slop)
 
     def _build_window(self, keep: bool) -> None:
-        """A window with the current settings; with ``keep``, the old window's frames re-evaluated in it."""
+        """A window with the current settings; with ``keep``, the old window's frames re-evaluated
+        in it."""
         frames = list(self._history) if keep else []
-        options = dict(max_frames=self.p["window_frames"], max_age=self.p["window_seconds"] or None,
-                       noise_bound=self.p["noise_bound"], bound_mode=self.p["noise_bound_mode"],
-                       min_frames=self.p["min_frames"], min_support=self.p["min_support"])
+        options = dict(
+            max_frames=self.p["window_frames"],
+            max_age=self.p["window_seconds"] or None,
+            noise_bound=self.p["noise_bound"],
+            bound_mode=self.p["noise_bound_mode"],
+            min_frames=self.p["min_frames"],
+            min_support=self.p["min_support"],
+        )
         # The window of the core rewrite weighs frames by their std_rel and takes no noise bound;
         # pass what this FocalWindow accepts (the bound still shapes each frame's estimate).
         self.window = FocalWindow(**{k: v for k, v in options.items() if k in _WINDOW_OPTIONS})
@@ -257,10 +339,17 @@ class FcopNode(Node):
 
     def _update_estimate_locked(self, win) -> None:
         std = getattr(win, "std_rel", None)
-        if win.focal is None or std is None or std > self.p["max_uncertainty"] or self._size is None:
+        if (
+            win.focal is None
+            or std is None
+            or std > self.p["max_uncertainty"]
+            or self._size is None
+        ):
             self._estimate = None
         else:
-            self._estimate = _Publishable(float(win.focal), float(std), self._size[0], self._size[1], win)
+            self._estimate = _Publishable(
+                float(win.focal), float(std), self._size[0], self._size[1], win
+            )
 
     def _reset_locked(self) -> None:
         self.window.reset()
@@ -273,16 +362,38 @@ class FcopNode(Node):
         """(cx, cy, D, distortion model, R) for a w x h image, or _Reject."""
         p, cam = self.p, self._cam_in
         if cam is not None and cam.width and cam.height and (cam.width, cam.height) != (w, h):
-            raise _Reject("camera_info_size_mismatch",
-                          f"camera_info_in is {cam.width}x{cam.height}, the images are {w}x{h}")
+            raise _Reject(
+                "camera_info_size_mismatch",
+                f"camera_info_in is {cam.width}x{cam.height}, the images are {w}x{h}",
+            )
         use_cam = cam is not None and (cam.k[2] != 0 or cam.k[5] != 0)
-        cx = p["principal_point_x"] if p["principal_point_x"] >= 0 else cam.k[2] if use_cam else image_centre(w, h)[0]
-        cy = p["principal_point_y"] if p["principal_point_y"] >= 0 else cam.k[5] if use_cam else image_centre(w, h)[1]
+        cx = (
+            p["principal_point_x"]
+            if p["principal_point_x"] >= 0
+            else cam.k[2]
+            if use_cam
+            else image_centre(w, h)[0]
+        )
+        cy = (
+            p["principal_point_y"]
+            if p["principal_point_y"] >= 0
+            else cam.k[5]
+            if use_cam
+            else image_centre(w, h)[1]
+        )
         if not (0 <= cx <= w - 1 and 0 <= cy <= h - 1):
-            raise _Reject("principal_point_outside",
-                          f"principal point ({cx}, {cy}) is outside the {w}x{h} image")
+            raise _Reject(
+                "principal_point_outside",
+                f"principal point ({cx}, {cy}) is outside the {w}x{h} image",
+            )
         if cam is not None and cam.distortion_model:
-            return float(cx), float(cy), [float(v) for v in cam.d], cam.distortion_model, [float(v) for v in cam.r]
+            return (
+                float(cx),
+                float(cy),
+                [float(v) for v in cam.d],
+                cam.distortion_model,
+                [float(v) for v in cam.r],
+            )
         return float(cx), float(cy), None, None, None
 
     def _camera_info(self, focal: float, w: int, h: int, header):
@@ -300,8 +411,10 @@ class FcopNode(Node):
         if any(v != 0 for v in msg.d) and not self._warned_distortion:
             self._warned_distortion = True
             self.get_logger().warning(
-                f"fcop_node: camera_info_in has non-zero distortion ({msg.distortion_model} D={list(msg.d)}): fCOP "
-                "assumes a pinhole camera, feed it rectified images; the output keeps D and the model")
+                f"fcop_node: camera_info_in has non-zero distortion ({msg.distortion_model} "
+                f"D={list(msg.d)}): fCOP assumes a pinhole camera, feed it rectified images; the "
+                "output keeps D and the model"
+            )
 
     # ----- input side: cheap, never waits for the estimator
     def _on_image(self, index: int, msg: Image) -> None:
@@ -322,31 +435,44 @@ class FcopNode(Node):
                 if self.worker.put((stamp_set, msgs)):
                     self.handoff_dropped += 1
                     self.rejected["estimator_busy"] += 1
-                    self._throttle.warn("estimator_busy", "fcop_node: the estimator is slower than the input: "
-                                                          "skipped a frame (it works on the newest one)")
+                    self._throttle.warn(
+                        "estimator_busy",
+                        "fcop_node: the estimator is slower than the input: "
+                        "skipped a frame (it works on the newest one)",
+                    )
             for i, stamps, ref in outliers:
                 self.rejected[f"outlier_stamp_{INPUTS[i]}"] += len(stamps)
         for i, stamps, ref in outliers:
-            self._throttle.warn(f"outlier_{i}", f"fcop_node: dropped {len(stamps)} {INPUTS[i]} message(s) with an "
-                                                f"outlier stamp ({', '.join(_sec(s) for s in stamps)}; the "
-                                                f"{INPUTS[i]} stamps before were at {_sec(ref)})")
+            self._throttle.warn(
+                f"outlier_{i}",
+                f"fcop_node: dropped {len(stamps)} {INPUTS[i]} message(s) with an "
+                f"outlier stamp ({', '.join(_sec(s) for s in stamps)}; the "
+                f"{INPUTS[i]} stamps before were at {_sec(ref)})",
+            )
         for stamp_set, msgs in sets:
             self._check_frame_ids(msgs)
         for i, s, m in accepted:
             if i == 0:
                 self._answer_depth(s, m)
         if jumped:
-            self._throttle.warn("time_jump", "fcop_node: time jumped back (looped bag?): synchroniser and "
-                                             "window reset")
+            self._throttle.warn(
+                "time_jump",
+                "fcop_node: time jumped back (looped bag?): synchroniser and window reset",
+            )
         for reason, n in new_drops.items():
             if reason == "outlier_stamp":  # counted per input above
                 continue
             self._reject("sync_" + reason, n)
             if reason == "time_jump_reset":
                 continue
-            which = ", ".join(f"{INPUTS[i]} {k}" for (r, i), k in sorted(new_inputs.items()) if r == reason)
-            self._throttle.warn("sync_" + reason, f"fcop_node: dropped {n} message(s) in the synchroniser: "
-                                                  f"{reason.replace('_', ' ')} ({which})")
+            which = ", ".join(
+                f"{INPUTS[i]} {k}" for (r, i), k in sorted(new_inputs.items()) if r == reason
+            )
+            self._throttle.warn(
+                "sync_" + reason,
+                f"fcop_node: dropped {n} message(s) in the synchroniser: "
+                f"{reason.replace('_', ' ')} ({which})",
+            )
 
     def _check_frame_ids(self, msgs) -> None:
         ids = [m.header.frame_id for m in msgs]
@@ -354,9 +480,12 @@ class FcopNode(Node):
             reason = "frame_id_empty" if not all(ids) else "frame_id_mismatch"
             with self._lock:
                 self.warnings[reason] += 1
-            self._throttle.warn(reason, "fcop_node: the inputs of one frame name different or empty frame_ids ("
-                                + ", ".join(f"{n} {i!r}" for n, i in zip(INPUTS, ids))
-                                + "): the outputs use the depth image's")
+            self._throttle.warn(
+                reason,
+                "fcop_node: the inputs of one frame name different or empty frame_ids ("
+                + ", ".join(f"{n} {i!r}" for n, i in zip(INPUTS, ids))
+                + "): the outputs use the depth image's",
+            )
 
     def _answer_depth(self, stamp: int, msg: Image) -> None:
         """Publish the CameraInfo of one depth image with the current estimate, if there is one."""
@@ -388,9 +517,18 @@ class FcopNode(Node):
         self._remember(self._answered, stamp)
         self._unanswered.pop(stamp, None)
         self._last_info_stamp = max(self._last_info_stamp, stamp)
-        self._latest = LatestEstimate(stamp, float(info.k[0]), float(info.k[2]), float(info.k[5]), int(info.width),
-                                      int(info.height), getattr(win, "std_rel", None), int(win.support),
-                                      int(win.frames), tuple(objects))
+        self._latest = LatestEstimate(
+            stamp,
+            float(info.k[0]),
+            float(info.k[2]),
+            float(info.k[5]),
+            int(info.width),
+            int(info.height),
+            getattr(win, "std_rel", None),
+            int(win.support),
+            int(win.frames),
+            tuple(objects),
+        )
 
     # ----- worker thread: conversions, estimation, poses
     def _estimate_item(self, item, generation: int) -> None:
@@ -400,7 +538,9 @@ class FcopNode(Node):
     def _on_worker_error(self, item, exc: Exception) -> None:
         """The node must outlive any single bad frame: count it and say which."""
         self._reject("exception")
-        self._throttle.warn("exception", f"fcop_node: frame {item[0]} failed: {type(exc).__name__}: {exc}")
+        self._throttle.warn(
+            "exception", f"fcop_node: frame {item[0]} failed: {type(exc).__name__}: {exc}"
+        )
 
     def _reject(self, reason: str, n: int = 1) -> None:
         """Count dropped input; the worker and the executor thread both do, diagnostics reads."""
@@ -432,8 +572,15 @@ class FcopNode(Node):
     def counts(self) -> NodeCounts:
         """The node's counters, read together."""
         with self._lock:
-            return NodeCounts(self.received, self.sync.stats.matched, self.worker.processed, self.published,
-                              self.handoff_dropped, self.camera_info_published, dict(self.rejected))
+            return NodeCounts(
+                self.received,
+                self.sync.stats.matched,
+                self.worker.processed,
+                self.published,
+                self.handoff_dropped,
+                self.camera_info_published,
+                dict(self.rejected),
+            )
 
     def process(self, stamp: int, msgs, generation: int | None = None) -> bool:
         """Estimate one synchronised frame, update the window and publish the frame's poses and
@@ -451,8 +598,11 @@ class FcopNode(Node):
             return False
         if not (depth.shape == nocs.shape[:2] == mask.shape):
             self._reject("size_mismatch")
-            self._throttle.warn("size_mismatch", f"fcop_node: rejected frame: image sizes differ: depth "
-                                                 f"{depth.shape[::-1]}, nocs {nocs.shape[1::-1]}, mask {mask.shape[::-1]}")
+            self._throttle.warn(
+                "size_mismatch",
+                f"fcop_node: rejected frame: image sizes differ: depth "
+                f"{depth.shape[::-1]}, nocs {nocs.shape[1::-1]}, mask {mask.shape[::-1]}",
+            )
             return False
         h, w = depth.shape
         try:
@@ -464,20 +614,34 @@ class FcopNode(Node):
             return False
         if p["nocs_convention"] == "nocs_dataset":
             nocs = to_fcop_convention(nocs)
-        est = estimate_focal(depth, nocs, mask, (cx, cy), triplets_per_object=p["triplets_per_object"],
-                             noise_bound=p["noise_bound"], bound_mode=p["noise_bound_mode"],
-                             focal_range=(p["focal_min"], p["focal_max"]), min_object_pixels=p["min_object_pixels"],
-                             poses=False, seed=int(self._rng.integers(2 ** 31)))
+        est = estimate_focal(
+            depth,
+            nocs,
+            mask,
+            (cx, cy),
+            triplets_per_object=p["triplets_per_object"],
+            noise_bound=p["noise_bound"],
+            bound_mode=p["noise_bound_mode"],
+            focal_range=(p["focal_min"], p["focal_max"]),
+            min_object_pixels=p["min_object_pixels"],
+            poses=False,
+            seed=int(self._rng.integers(2**31)),
+        )
         if est.focal is None:
             self._reject("no_evidence")
-            self._throttle.warn("no_evidence", f"fcop_node: frame without focal evidence: {est.reason}")
+            self._throttle.warn(
+                "no_evidence", f"fcop_node: frame without focal evidence: {est.reason}"
+            )
         if est.mirrored:
             with self._lock:
                 self.rejected["mirrored_nocs"] += len(est.mirrored)
-            self._throttle.warn("mirrored_nocs", f"fcop_node: the NOCS of instance(s) {est.mirrored} fit their shape "
-                                                 "only as a mirror image: is the nocs image's channel order right "
-                                                 "(rgb8 vs bgr8), or its axis convention (parameter nocs_convention)? "
-                                                 "The focal length is unaffected; no pose is published for them")
+            self._throttle.warn(
+                "mirrored_nocs",
+                f"fcop_node: the NOCS of instance(s) {est.mirrored} fit their shape "
+                "only as a mirror image: is the nocs image's channel order right "
+                "(rgb8 vs bgr8), or its axis convention (parameter nocs_convention)? "
+                "The focal length is unaffected; no pose is published for them",
+            )
         resized = None
         with self._lock:
             if generation is not None and generation != self.worker.generation:
@@ -493,16 +657,24 @@ class FcopNode(Node):
             self.last_estimate = est
             self._proc_times.append(time.perf_counter() - t0)
         if resized is not None:
-            self.get_logger().info(f"fcop_node: image size changed from {resized[0]}x{resized[1]} to {w}x{h}: "
-                                   "new focal window")
+            self.get_logger().info(
+                f"fcop_node: image size changed from {resized[0]}x{resized[1]} to {w}x{h}: "
+                "new focal window"
+            )
         if win.changed:
-            self.get_logger().info(f"fcop_node: focal length changed (zoom?): window restarted at {win.focal}")
+            self.get_logger().info(
+                f"fcop_node: focal length changed (zoom?): window restarted at {win.focal}"
+            )
         if ready is None:
             return False
-        with self._pub_lock:  # this frame's depth image arrived before there was an estimate: answer it now
+        with (
+            self._pub_lock
+        ):  # this frame's depth image arrived before there was an estimate: answer it now
             if stamp in self._unanswered and stamp > self._last_info_stamp:
                 try:
-                    self._publish_info(stamp, self._camera_info(ready.focal, w, h, depth_msg.header), win, [])
+                    self._publish_info(
+                        stamp, self._camera_info(ready.focal, w, h, depth_msg.header), win, []
+                    )
                 except _Reject:
                     pass
         objects = []
@@ -524,8 +696,12 @@ class FcopNode(Node):
 
     # ----- services
     def _latched_publisher(self):
-        latched = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        latched = QoSProfile(
+            depth=1,
+            history=HistoryPolicy.KEEP_LAST,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        )
         return self.create_publisher(CameraInfo, "~/latest_camera_info", latched)
 
     def _on_reset(self, request, response):
@@ -542,7 +718,8 @@ class FcopNode(Node):
         return response
 
     def calibration_path(self) -> str:
-        """Where ~/save_calibration writes: calibration_file, else camera_info_manager's default."""
+        """Where ~/save_calibration writes: calibration_file, else camera_info_manager's
+        default."""
         if self.p["calibration_file"]:
             return os.path.expanduser(self.p["calibration_file"])
         return default_calibration_path(self.p["camera_name"])
@@ -579,8 +756,9 @@ class FcopNode(Node):
         response.message = f"saved focal {est.focal:.2f} px (std_rel {est.std_rel:.4f}) to {path}"
         if self.set_info_client is not None:
             if self.set_info_client.service_is_ready():
-                self.set_info_client.call_async(SetCameraInfo.Request(camera_info=info)).add_done_callback(
-                    self._on_set_camera_info_done)
+                self.set_info_client.call_async(
+                    SetCameraInfo.Request(camera_info=info)
+                ).add_done_callback(self._on_set_camera_info_done)
                 response.message += f"; sent to {self.set_info_client.srv_name}"
             else:
                 response.message += f"; {self.set_info_client.srv_name} is not available"
@@ -590,10 +768,14 @@ class FcopNode(Node):
     def _on_set_camera_info_done(self, future) -> None:
         res = future.result()
         if res is None or not res.success:
-            self.get_logger().error(f"fcop_node: {self.set_info_client.srv_name} refused the calibration: "
-                                    f"{getattr(res, 'status_message', 'no answer')}")
+            self.get_logger().error(
+                f"fcop_node: {self.set_info_client.srv_name} refused the calibration: "
+                f"{getattr(res, 'status_message', 'no answer')}"
+            )
         else:
-            self.get_logger().info(f"fcop_node: {self.set_info_client.srv_name} took the calibration")
+            self.get_logger().info(
+                f"fcop_node: {self.set_info_client.srv_name} took the calibration"
+            )
 
     # ----- diagnostics
     def diagnostic_status(self) -> DiagnosticStatus:
@@ -602,18 +784,27 @@ class FcopNode(Node):
         with self._lock:  # the worker thread updates these while we read
             work = self.worker.state()
             reading = DiagnosticsInput(
-                now=now, window=self.window.current, publishable=self._estimate is not None,
+                now=now,
+                window=self.window.current,
+                publishable=self._estimate is not None,
                 window_fill=f"{len(self.window)}/{self.p['window_frames']}",
-                max_uncertainty=self.p["max_uncertainty"], max_estimate_age=self.p["max_estimate_age"],
-                matched=self.sync.stats.matched, processed=work.processed, skipped=self.handoff_dropped,
-                sync_dropped=self.sync.stats.dropped_total, camera_info_published=self.camera_info_published,
+                max_uncertainty=self.p["max_uncertainty"],
+                max_estimate_age=self.p["max_estimate_age"],
+                matched=self.sync.stats.matched,
+                processed=work.processed,
+                skipped=self.handoff_dropped,
+                sync_dropped=self.sync.stats.dropped_total,
+                camera_info_published=self.camera_info_published,
                 busy_for=None if work.busy_since is None else now - work.busy_since,
                 age=None if work.last_done is None else now - work.last_done,
                 processing_ms=tuple(t * 1000 for t in self._proc_times),
-                rejected=dict(self.rejected), warnings=dict(self.warnings))
+                rejected=dict(self.rejected),
+                warnings=dict(self.warnings),
+            )
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped)
-        return diagnostic_status(f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading,
-                                 rates)
+        return diagnostic_status(
+            f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading, rates
+        )
 
     def publish_diagnostics(self) -> DiagnosticArray:
         msg = DiagnosticArray()
@@ -643,7 +834,8 @@ def _sec(stamp) -> str:
 
 def main(args=None) -> int:
     """Entry point of ``ros2 run fcop_ros fcop_node``: spin until Ctrl-C or external shutdown.
-    Exit codes: 0 after a clean shutdown, 2 for a parameter it cannot run with (one line on stderr)."""
+    Exit codes: 0 after a clean shutdown, 2 for a parameter it cannot run with (one line on
+    stderr)."""
     rclpy.init(args=args)
     node = None
     try:

@@ -1,5 +1,6 @@
 """Spin an rclpy executor until a condition holds or a deadline passes: how the tools and the
 tests wait for DDS traffic without a bare sleep."""
+
 from __future__ import annotations
 
 import time

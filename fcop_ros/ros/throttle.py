@@ -1,5 +1,6 @@
 """Log throttling by reason: a flood of one problem becomes one line every few seconds with a
 count, while a different problem still gets its own line at once. No rclpy (any logger)."""
+
 from __future__ import annotations
 
 import math
@@ -29,7 +30,9 @@ class LogThrottle:
     def warn(self, reason: str, text: str) -> None:
         n = self._due(reason)
         if n:
-            self.logger.warning(f"{text}" + (f" ({n} such since the last report)" if n > 1 else ""))
+            self.logger.warning(
+                f"{text}" + (f" ({n} such since the last report)" if n > 1 else "")
+            )
 
     def info(self, reason: str, text: str) -> None:
         n = self._due(reason)

@@ -174,7 +174,7 @@ def replay(
         executor.add_node(feeder)
 
         def spin_until(cond, limit=timeout):
-            """Spin until ``cond()`` holds; ReplayError with the node's counts after ``limit`` s."""
+            """Spin until ``cond()`` holds; after ``limit`` s a ReplayError with the counts."""
             if not spin(executor, cond, limit, step=0.01):
                 n = node.counts
                 raise ReplayError(
