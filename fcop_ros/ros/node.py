@@ -155,14 +155,11 @@ class FcopNode(Node):
         self.received = 0  # input messages
         self.published = 0  # frames whose estimate was published (poses and markers)
         self.camera_info_published = 0
-        self.handoff_dropped = (
-            0  # matched frames replaced in the hand-off before the estimator took them
-        )
+        # Matched frames replaced in the hand-off before the estimator took them.
+        self.handoff_dropped = 0
         self.last_estimate = None  # the FocalEstimate of the newest processed frame
         self._proc_times: deque = deque(maxlen=200)
-        self._rates = RateWindow(
-            5.0
-        )  # frame and estimator rates over the last 5 s, for diagnostics
+        self._rates = RateWindow(5.0)  # frame and estimator rates over 5 s, for diagnostics
         self._throttle = LogThrottle(self.get_logger())
         self._lock = threading.Lock()
         self._pub_lock = threading.Lock()  # CameraInfo publication from the two threads
@@ -176,14 +173,10 @@ class FcopNode(Node):
         )
         self._size = None  # (width, height) of the frames in the window
         self._estimate: _Publishable | None = None
-        self._history: deque = (
-            deque()
-        )  # the window's frames, light, to re-evaluate under new settings
+        self._history: deque = deque()  # the window's frames, light, to re-evaluate later
         self._last_objects: list = []
         self._answered: OrderedDict = OrderedDict()  # depth stamps that got their CameraInfo
-        self._unanswered: OrderedDict = (
-            OrderedDict()
-        )  # depth stamps that arrived without an estimate
+        self._unanswered: OrderedDict = OrderedDict()  # depth stamps that came before an estimate
         self._last_info_stamp = -1
         self._cam_in: CameraInfo | None = None
         self._warned_distortion = False
@@ -256,9 +249,8 @@ class FcopNode(Node):
         for name, spec in PARAMETERS.items():
             given = overrides.get(name)
             if given is not None and isinstance(spec.default, float) and type(given.value) is int:
-                overrides[name] = Parameter(
-                    name, value=float(given.value)
-                )  # focal_min:=300 means 300.0
+                # focal_min:=300 means 300.0
+                overrides[name] = Parameter(name, value=float(given.value))
             try:
                 self.declare_parameter(name, spec.default, descriptor(name))
             except ParameterException:
@@ -667,9 +659,8 @@ class FcopNode(Node):
             )
         if ready is None:
             return False
-        with (
-            self._pub_lock
-        ):  # this frame's depth image arrived before there was an estimate: answer it now
+        # This frame's depth image arrived before there was an estimate: answer it now.
+        with self._pub_lock:
             if stamp in self._unanswered and stamp > self._last_info_stamp:
                 try:
                     self._publish_info(
