@@ -77,15 +77,15 @@ def main() -> None:
     args = ap.parse_args()
     if args.cores:
         os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[: args.cores]))
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    os.environ.setdefault("ROS_DOMAIN_ID", str(50 + os.getpid() % 150))
+    from fcop_ros.ros.dds import keep_on_this_machine
+    keep_on_this_machine()
     from geometry_msgs.msg import PoseArray
     from rclpy.node import Node
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
 
-    import fcop_ros.node as node_module
-    from fcop_ros.node import FcopNode
+    import fcop_ros.ros.node as node_module
+    from fcop_ros.ros.node import FcopNode
     if args.slow_ms > 0:
         real = node_module.estimate_focal
 

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import contextlib
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -14,10 +13,13 @@ from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
-from msg_adapters import depth_to_image, mask_to_image, nocs_to_image, stamp_ns  # noqa: F401 (re-exported)
+from fcop_ros.ros.spin import spin_until  # noqa: F401 (re-exported for the tests)
+from msg_adapters import (  # noqa: F401 (stamp_ns re-exported for the tests)
+    depth_to_image, header_from_ns, mask_to_image, nocs_to_image, stamp_ns)
+
+FRAME_ID = "camera_optical_frame"
 
 
 @contextlib.contextmanager
@@ -33,27 +35,13 @@ def ros_context(args=None):
         ctx.try_shutdown()
 
 
-def spin_until(executor, condition, timeout: float = 20.0, step: float = 0.02) -> bool:
-    """Spin until ``condition()`` holds or the deadline passes; return whether it holds."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        executor.spin_once(timeout_sec=step)
-    return bool(condition())
-
-
-def header(stamp_ns: int, frame_id: str = "camera_optical_frame") -> Header:
-    h = Header()
-    h.stamp.sec, h.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    h.frame_id = frame_id
-    return h
-
-
-def frame_messages(frame, stamp_ns: int, depth_encoding="32FC1", nocs_encoding="32FC3", mask_encoding="mono8"):
-    """Depth, NOCS and mask Image messages of a rendered frame, all with the same header."""
-    h = header(stamp_ns)
-    return (depth_to_image(frame.depth, depth_encoding, h), nocs_to_image(frame.nocs, nocs_encoding, h),
+def frame_messages(frame, stamp: int, depth_encoding="32FC1", nocs_encoding="32FC3",
+                   mask_encoding="mono8"):
+    """Depth, NOCS and mask Image messages of a rendered frame stamped ``stamp`` (ns), all with the
+    same header."""
+    h = header_from_ns(stamp, FRAME_ID)
+    return (depth_to_image(frame.depth, depth_encoding, h),
+            nocs_to_image(frame.nocs, nocs_encoding, h),
             mask_to_image(frame.mask, mask_encoding, h))
 
 
@@ -75,11 +63,13 @@ def as_array(values) -> np.ndarray:
 class Harness:
     """fcop_node plus a tester node that publishes inputs and records outputs."""
 
-    def __init__(self, ctx, executor, node_args=None, inputs=("depth", "nocs", "mask"), **node_kwargs):
-        from fcop_ros.node import FcopNode
+    def __init__(self, ctx, executor, node_args=None, inputs=("depth", "nocs", "mask"),
+                 **node_kwargs):
+        from fcop_ros.ros.node import FcopNode
         self.node = FcopNode(context=ctx, cli_args=node_args, **node_kwargs)
         self.tester = Node("tester", context=ctx)
-        self.pubs = [self.tester.create_publisher(Image, t, qos_profile_sensor_data) for t in inputs]
+        self.pubs = [self.tester.create_publisher(Image, t, qos_profile_sensor_data)
+                     for t in inputs]
         self.info = Recorder(self.tester, CameraInfo, "camera_info")
         self.poses = Recorder(self.tester, PoseArray, "object_poses")
         self.markers = Recorder(self.tester, MarkerArray, "object_markers")
@@ -96,8 +86,8 @@ class Harness:
         """Spin until the estimator has taken (or skipped) every matched frame and is idle."""
         node = self.node
         if processed is None:
-            return spin_until(self.ex, lambda: node.received and node.processed + node.handoff_dropped
-                              >= node.sync.stats.matched and node.idle(), timeout)
+            return spin_until(self.ex, lambda: node.received and node.idle() and (
+                node.processed + node.handoff_dropped >= node.sync.stats.matched), timeout)
         return spin_until(self.ex, lambda: node.processed >= processed and node.idle(), timeout)
 
     def frame(self, msgs):
@@ -152,7 +142,7 @@ class Gate:
     """Holds the node's estimator: once closed, every frame estimate waits until it is opened."""
 
     def __init__(self, monkeypatch):
-        import fcop_ros.node as node_module
+        import fcop_ros.ros.node as node_module
         self.event = threading.Event()
         self.event.set()
         real = node_module.estimate_focal

@@ -157,3 +157,14 @@ def test_pose_and_marker_arrays():
     assert ma.markers[0].action == ma.markers[0].DELETEALL
     assert [m.id for m in ma.markers[1:]] == [3, 7]
     assert abs(ma.markers[1].scale.x - 0.3 / np.sqrt(3)) < 1e-12 and ma.markers[1].color.a > 0
+
+
+def test_header_from_nanoseconds_and_back():
+    from msg_adapters import header_from_ns, stamp_ns, time_from_ns, time_to_ns
+    ns = 1_700_000_000_123_456_789
+    h = header_from_ns(ns, "cam_optical")
+    assert (h.stamp.sec, h.stamp.nanosec) == (1_700_000_000, 123_456_789)
+    assert h.frame_id == "cam_optical"
+    assert stamp_ns(Image(header=h)) == ns and time_to_ns(time_from_ns(ns)) == ns
+    assert header_from_ns(0).frame_id == ""
+    assert time_to_ns(header_from_ns(999_999_999).stamp) == 999_999_999

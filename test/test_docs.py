@@ -6,7 +6,7 @@ import re
 
 import yaml
 
-from fcop_ros.node import PARAMETERS
+from fcop_ros.ros.params import PARAMETERS
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -15,14 +15,15 @@ def test_config_file_sets_every_parameter_to_its_default():
     with open(os.path.join(ROOT, "config", "fcop.yaml")) as fh:
         params = yaml.safe_load(fh)["/**"]["ros__parameters"]  # any node name, any namespace
     assert set(params) == set(PARAMETERS)
-    for name, (default, _, _) in PARAMETERS.items():
-        assert params[name] == default and type(params[name]) is type(default), name
+    for name, spec in PARAMETERS.items():
+        assert params[name] == spec.default and type(params[name]) is type(spec.default), name
 
 
 def test_readme_parameter_table_lists_every_parameter_with_its_default():
     text = open(os.path.join(ROOT, "README.md")).read()
     rows = dict(re.findall(r"^\| `(\w+)` \| ([^|]+) \|", text, flags=re.M))
-    for name, (default, _, _) in PARAMETERS.items():
+    for name, spec in PARAMETERS.items():
+        default = spec.default
         assert name in rows, name
         shown = rows[name].strip()
         expected = (

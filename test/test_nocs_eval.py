@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fcop_ros import estimate_focal
-from fcop_ros import nocs_eval as ne
+from fcop_ros.tools import nocs_eval as ne
 from fcop_ros.core.pose import rotation_angle_deg
 from fcop_ros.synthetic import random_scene, render
 

@@ -15,7 +15,8 @@ from visualization_msgs.msg import Marker
 from fcop_ros.core.pose import rotation_angle_deg
 from fcop_ros.synthetic.scenes import (BAD_CASES, camera_frame as cam, camera_frames, clean_frame,
                                        corrupted)
-from ros_helpers import Gate, Recorder, frame_messages, header, spin_until, stamp_ns
+from msg_adapters import header_from_ns
+from ros_helpers import Gate, Recorder, frame_messages, spin_until, stamp_ns
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config",
                       "fcop.yaml")
@@ -115,11 +116,14 @@ def test_runtime_parameter_changes(harness):
                               Parameter("sync_slop", value=0.02)])
     assert all(r.successful for r in ok)
     assert node.window.max_frames == 10 and node.sync.slop_ns == 20_000_000
-    # The node's own check, called as rclpy calls it: rclpy's descriptor would refuse the first
-    # two before the callback runs, which proves nothing about the node.
+    # Type and range: the descriptors, which rclpy applies before the node's callback runs.
+    refused = (("window_frames", 0, "out of range"), ("focal_min", 0.5, "out of range"),
+               ("queue_size", "five", "Wrong parameter type"))
+    for name, value, reason in refused:
+        res = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not res.successful and reason in res.reason, (name, res.reason)
+    # What a descriptor cannot say, the node's own check, called as rclpy calls it.
     bad = {
-        "window_frames": (0, "[1, 1000]"),                       # below range
-        "queue_size": ("five", "an integer"),                    # wrong type
         "noise_bound_mode": ("fuzzy", "one of relative, absolute"),  # not a choice
         "sync_mode": ("sometimes", "one of exact, approximate"),
         "focal_min": (30000.0, "below focal_max=20000.0"),       # above focal_max
@@ -134,6 +138,27 @@ def test_runtime_parameter_changes(harness):
     assert node.get_parameter("window_frames").value == 10 and node.p["sync_mode"] == "approximate"
     assert node.p["focal_min"] == 50.0 and node.p["noise_bound"] == 0.05
     assert node.set_parameters([Parameter("focal_min", value=100.0)])[0].successful
+
+
+def test_latest_is_the_last_camera_info_and_the_estimate_behind_it(harness):
+    h = harness()
+    assert h.node.latest is None
+    for k in range(2):
+        assert h.frame(frame_messages(cam(k), T0 + k * DT))
+    assert spin_until(h.ex, lambda: len(h.info) == 2 and len(h.poses) == 2, 10)
+    latest, info, win = h.node.latest, h.info.msgs[-1], h.node.window_estimate
+    assert latest.stamp_ns == stamp_ns(info) == T0 + DT
+    assert (latest.focal, latest.cx, latest.cy) == (info.k[0], info.k[2], info.k[5])
+    assert (latest.width, latest.height) == (info.width, info.height) == (640, 480)
+    # Frame 2's CameraInfo went out when its depth image arrived, normally before frame 2 was
+    # estimated: it carries the window of then (frame 1), which has since moved on.
+    assert 1 <= latest.frames <= win.frames == 2 and 0 < latest.support <= win.support
+    assert latest.std_rel is not None
+    assert len(latest.objects) == len(h.poses.msgs[-1].poses) > 0  # this stamp's frame is done
+    with pytest.raises(AttributeError):
+        latest.focal = 1.0  # a frozen snapshot: the node cannot change it under the reader
+    n = h.node.counts
+    assert (n.received, n.matched, n.processed, n.camera_info_published) == (6, 2, 2, 2)
 
 
 def test_reset_service_clears_window_and_the_latched_estimate(harness, capfd):
@@ -316,10 +341,10 @@ def test_only_the_mask_stamped_zero_is_named_and_never_resets(harness, capfd):
 def test_mismatched_and_empty_frame_ids_are_warned(harness, capfd):
     h = harness()
     d, n, m = frame_messages(clean_frame(4), T0)
-    n.header = header(T0, "nocs_frame")
+    n.header = header_from_ns(T0, "nocs_frame")
     assert h.frame((d, n, m))
     d, n, m = frame_messages(clean_frame(4), T0 + DT)
-    m.header = header(T0 + DT, "")
+    m.header = header_from_ns(T0 + DT, "")
     assert h.frame((d, n, m))
     assert h.node.warnings == {"frame_id_mismatch": 1, "frame_id_empty": 1}
     err = capfd.readouterr().err
@@ -344,8 +369,8 @@ def test_every_depth_image_gets_one_camera_info_while_the_estimator_is_stuck(har
         assert h.frame(frame_messages(cam(0), T0))
         gate.close()
         h.send(frame_messages(cam(1), T0 + DT))
-        # the estimator holds frame 1
-        assert spin_until(h.ex, lambda: h.node._busy_since is not None, 10)
+        # The estimator holds frame 1.
+        assert spin_until(h.ex, lambda: h.node.worker.busy_since is not None, 10)
         for k in range(2, 10):
             h.send(frame_messages(cam(k), T0 + k * DT))
             # Published while the estimator cannot finish anything: publishing does not wait

@@ -12,7 +12,7 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
-from fcop_ros.dds import large_image_profile, profile_env_vars
+from fcop_ros.ros.dds import large_image_profile, profile_env_vars
 from fcop_ros.synthetic import apply_noise, render_scene
 from ros_helpers import Recorder, frame_messages, ros_context, spin_until, stamp_ns
 
@@ -140,15 +140,13 @@ def test_colcon_build_gives_the_ros2_run_layout(tmp_path):
     )
     # What `ros2 run fcop_ros fcop_node` does, after `source install/setup.bash`: find the
     # package in the ament index of AMENT_PREFIX_PATH, run <prefix>/lib/fcop_ros/fcop_node.
-    script = (
-        "source install/setup.bash && "
-        f"prefix=$({sys.executable} -c 'from ament_index_python.packages import "
-        "get_package_prefix as g; "
-        'print(g("fcop_ros"))\') && '
-        f"{sys.executable} -c 'from fcop_ros.config import config_path; print(config_path())' && "
-        "exec $prefix/lib/fcop_ros/fcop_node --ros-args -r __node:=fcop_colcon "
-        "--params-file $prefix/share/fcop_ros/config/fcop.yaml"
-    )
+    script = ("source install/setup.bash && "
+              f"prefix=$({sys.executable} -c 'from ament_index_python.packages import "
+              "get_package_prefix as g; print(g(\"fcop_ros\"))') && "
+              f"{sys.executable} -c 'from fcop_ros.ros.config import config_path; "
+              "print(config_path())' && "
+              "exec $prefix/lib/fcop_ros/fcop_node --ros-args -r __node:=fcop_colcon "
+              "--params-file $prefix/share/fcop_ros/config/fcop.yaml")
     proc = subprocess.Popen(["bash", "-c", script], cwd=ws, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:

@@ -9,13 +9,13 @@ import pytest
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import Header
 
-from fcop_ros import make_bag as mb
-from fcop_ros import replay as rp
-from fcop_ros.bagio import BagSource, BagWriter
+from fcop_ros.tools import make_bag as mb
+from fcop_ros.tools import estimates_csv, replay_offline, replay_play
+from fcop_ros.tools import replay as rp
+from fcop_ros.tools.bagio import BagSource, BagWriter
 from fcop_ros.synthetic import SequenceSpec
-from msg_adapters import depth_to_image
+from msg_adapters import depth_to_image, header_from_ns, time_to_ns
 from ros_helpers import ros_context, spin_until, stamp_ns
 
 W, H, F = 160, 120, 150.0
@@ -30,8 +30,10 @@ def tiny_bag(path, frames=6, storage="mcap", preset="mild", rate=30.0, zoom=None
 
 
 def run(bag, out, **kw):
-    return rp.replay(bag, mb.TOPICS["depth"], mb.TOPICS["nocs"], mb.TOPICS["mask"], out,
-                     truth_topic=kw.pop("truth_topic", mb.TOPICS["truth"]), progress=False, **kw)
+    t = mb.TOPICS
+    return replay_offline.replay(bag, t["depth"], t["nocs"], t["mask"], out,
+                                 truth_topic=kw.pop("truth_topic", t["truth"]), progress=False,
+                                 **kw)
 
 
 def read_csv(path):
@@ -55,7 +57,7 @@ def test_replay_outputs(tmp_path, storage):
     stamps = [START + k * int(round(1e9 / 30)) for k in range(6)]
     assert s.frames_read == 6 and s.frames_estimated == 6 and not s.damaged
     rows = read_csv(tmp_path / "out" / "estimates.csv")
-    assert list(rows[0]) == rp.CSV_COLUMNS + ["focal_true", "focal_error_pct"]
+    assert list(rows[0]) == estimates_csv.CSV_COLUMNS + ["focal_true", "focal_error_pct"]
     assert [int(r["stamp_ns"]) for r in rows] == stamps
     for r in rows:
         # 160x120 frames carry little evidence: the truth within the reported +-3 std_rel.
@@ -152,7 +154,7 @@ def _bag_of(path, frames):
 
 
 def test_unsupported_encoding_and_no_matching_frames(tmp_path, capsys):
-    h = Header()
+    h = header_from_ns(0)
     img = depth_to_image(np.ones((8, 8)), "32FC1", h)
     bad = Image(header=h, height=8, width=8, encoding="mono8", step=8, data=bytes(64))
     bag = _bag_of(tmp_path / "bad", [(START, [("/d", bad), ("/n", img), ("/m", img)])])
@@ -167,8 +169,7 @@ def test_unsupported_encoding_and_no_matching_frames(tmp_path, capsys):
     from msg_adapters import mask_to_image, nocs_to_image
     frames = []
     for k in range(3):
-        ha, hb = Header(), Header()
-        ha.stamp.sec, hb.stamp.sec = 100 + k, 200 + k
+        ha, hb = header_from_ns((100 + k) * 10**9), header_from_ns((200 + k) * 10**9)
         frames.append((START + k, [("/d", depth_to_image(np.ones((8, 8)), "32FC1", ha)),
                                    ("/n", nocs_to_image(np.full((8, 8, 3), 0.5), "32FC3", ha)),
                                    ("/m", mask_to_image(np.ones((8, 8), int), "mono8", hb))]))
@@ -231,9 +232,8 @@ def test_play_mode_timing_and_order(tmp_path):
             )
         ex.add_node(sub_node)
         result = {}
-        th = threading.Thread(
-            target=lambda: result.setdefault("r", rp.play(bag, topics, rate=2.0, context=ctx))
-        )
+        th = threading.Thread(target=lambda: result.setdefault(
+            "r", replay_play.play(bag, topics, rate=2.0, context=ctx)))
         th.start()
         assert spin_until(ex, lambda: all(len(v) == 6 for v in got.values()), 30)
         th.join(10)
@@ -283,20 +283,17 @@ def test_play_publishes_the_recorded_time_on_clock(tmp_path):
     with ros_context() as (ctx, ex):
         listener = Node("clock_listener", context=ctx)
         events = []
-        listener.create_subscription(Clock, "/clock",
-                                     lambda m: events.append(("clock", stamp_ns_of(m.clock))), 100)
-        listener.create_subscription(Image, topics[0],
-                                     lambda m: events.append(("depth", stamp_ns(m))), 100)
+        listener.create_subscription(
+            Clock, "/clock", lambda m: events.append(("clock", time_to_ns(m.clock))), 100)
+        listener.create_subscription(
+            Image, topics[0], lambda m: events.append(("depth", stamp_ns(m))), 100)
         follower = Node("sim_time_follower", context=ctx,
                         parameter_overrides=[Parameter("use_sim_time", value=True)])
         ex.add_node(listener)
         ex.add_node(follower)
         result = {}
-        th = threading.Thread(
-            target=lambda: result.setdefault(
-                "r", rp.play(bag, topics, rate=2.0, context=ctx, clock_hz=50.0)
-            )
-        )
+        th = threading.Thread(target=lambda: result.setdefault(
+            "r", replay_play.play(bag, topics, rate=2.0, context=ctx, clock_hz=50.0)))
         th.start()
         assert spin_until(
             ex,
@@ -316,10 +313,6 @@ def test_play_publishes_the_recorded_time_on_clock(tmp_path):
         assert [t for kind, t in events if kind == "depth"] == stamps
         follower.destroy_node()
         listener.destroy_node()
-
-
-def stamp_ns_of(t):
-    return t.sec * 1_000_000_000 + t.nanosec
 
 
 def test_play_on_a_truncated_bag_reports_the_damage(tmp_path, capsys):

@@ -11,10 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from fcop_ros import make_bag as mb
-from fcop_ros import replay as rp
-from fcop_ros.bagio import BagSource
-from fcop_ros.node import PARAMETERS
+from fcop_ros.tools import make_bag as mb
+from fcop_ros.tools import replay as rp
+from fcop_ros.tools import estimates_csv, replay_params
+from fcop_ros.tools.bagio import BagSource
+from fcop_ros.ros.params import PARAMETERS
 from fcop_ros.synthetic import SequenceSpec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -115,27 +116,22 @@ def test_params_file_sections_for_any_namespace(tmp_path):
     """Wildcard sections apply first, the node's own (any namespace, nested or not) after them,
     then -p; sections of other nodes are ignored."""
     pf = tmp_path / "p.yaml"
-    pf.write_text(
-        "other:\n  ros__parameters:\n    window_frames: 999\n"
-        "/camera/fcop_node:\n  ros__parameters:\n    window_frames: 7\n    seed: 5\n"
-        "/**:\n  ros__parameters:\n    window_frames: 9\n    min_support: 40\n    use_sim_time: "
-        "false\n"
-        "robot:\n  arm:\n    fcop_node:\n      ros__parameters:\n        min_frames: 3\n"
-    )
-    assert rp.load_params_file(pf) == {"window_frames": 7, "min_support": 40,
-                                       "use_sim_time": False, "seed": 5, "min_frames": 3}
-    params = rp.node_parameters(str(pf),
-                                ["seed:=11", "focal_min:=60", "noise_bound_mode:=absolute",
-                                          "noise_bound:=5"])
+    pf.write_text("other:\n  ros__parameters:\n    window_frames: 999\n"
+                  "/camera/fcop_node:\n  ros__parameters:\n    window_frames: 7\n    seed: 5\n"
+                  "/**:\n  ros__parameters:\n    window_frames: 9\n    min_support: 40\n"
+                  "    use_sim_time: false\n"
+                  "robot:\n  arm:\n    fcop_node:\n      ros__parameters:\n"
+                  "        min_frames: 3\n")
+    assert replay_params.load_params_file(pf) == {
+        "window_frames": 7, "min_support": 40, "use_sim_time": False, "seed": 5, "min_frames": 3}
+    params = replay_params.node_parameters(
+        str(pf), ["seed:=11", "focal_min:=60", "noise_bound_mode:=absolute", "noise_bound:=5"])
     assert params["seed"] == 11 and params["window_frames"] == 7
     # an int for a double
     assert params["focal_min"] == 60.0 and type(params["focal_min"]) is float
     assert params["noise_bound"] == 5.0 and params["noise_bound_mode"] == "absolute"
-    assert (
-        rp.parse_value("1e3") == 1000.0
-        and rp.parse_value("true") is True
-        and rp.parse_value("x") == "x"
-    )
+    parse = replay_params.parse_value
+    assert parse("1e3") == 1000.0 and parse("true") is True and parse("x") == "x"
 
 
 def test_out_is_a_file(bag, tmp_path, capsys):
@@ -198,7 +194,7 @@ def test_disk_full_midway_keeps_the_rows_before_and_says_what_was_lost(
         fh = real_open(path, mode, *a, **kw)
         return _FullAfter(fh, 1 + 3) if Path(path).name == "estimates.csv" else fh
 
-    monkeypatch.setattr(rp, "open", open_on_small_disk, raising=False)
+    monkeypatch.setattr(estimates_csv, "open", open_on_small_disk, raising=False)
     out = tmp_path / "o"
     (out / "report.png").mkdir(parents=True)  # and the report cannot be written either
     assert rp.main(args(bag, out)) == 4
@@ -220,7 +216,7 @@ def test_disk_full_midway_keeps_the_rows_before_and_says_what_was_lost(
 
 def test_subprocess_exit_codes_without_traceback(bag, tmp_path):
     """The installed entry point, as a user runs it."""
-    exe = [sys.executable, "-m", "fcop_ros.replay"]
+    exe = [sys.executable, "-m", "fcop_ros.tools.replay"]
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     r = subprocess.run(exe + args(bag, tmp_path / "o", "-p", "window_frames:=abc"),
                        capture_output=True, text=True, env=env, timeout=120)
@@ -234,9 +230,9 @@ def test_subprocess_exit_codes_without_traceback(bag, tmp_path):
 def test_the_shipped_config_applies_to_the_replayed_node():
     """Whether config/fcop.yaml is keyed 'fcop_node:' or '/**:', replay finds every parameter in
     it."""
-    from fcop_ros.config import config_path
-    params = rp.node_parameters(None)
+    from fcop_ros.ros.config import config_path
+    params = replay_params.node_parameters(None)
     assert set(PARAMETERS) <= set(params)
     for name, spec in PARAMETERS.items():
-        assert params[name] == spec[0], name
-    assert rp.load_params_file(config_path()) == params
+        assert params[name] == spec.default, name
+    assert replay_params.load_params_file(config_path()) == params

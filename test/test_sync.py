@@ -5,7 +5,7 @@ import itertools
 import numpy as np
 import pytest
 
-from fcop_ros.sync import StampSynchronizer
+from fcop_ros.ros.sync import StampSynchronizer
 
 MS = 1_000_000
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from fcop_ros import demo, make_bag as mb, nocs_eval, replay as rp
-from fcop_ros.bagio import BagSource
+from fcop_ros.tools import demo, make_bag as mb, nocs_eval, replay as rp
+from fcop_ros.tools.bagio import BagSource
 from fcop_ros.synthetic import SequenceSpec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -50,7 +50,7 @@ def test_make_bag_shows_progress_on_a_terminal(tmp_path):
     master, slave = pty.openpty()
     # a 100-column terminal
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 30, 100, 0, 0))
-    proc = subprocess.Popen([sys.executable, "-m", "fcop_ros.make_bag", str(tmp_path / "b"),
+    proc = subprocess.Popen([sys.executable, "-m", "fcop_ros.tools.make_bag", str(tmp_path / "b"),
                              "--frames", "3", "--width", "64", "--height", "48", "--objects", "2"],
                             stdout=subprocess.PIPE, stderr=slave, cwd=ROOT)
     os.close(slave)

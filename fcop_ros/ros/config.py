@@ -5,6 +5,8 @@ import os
 import sys
 
 _PACKAGE = "fcop_ros"
+# The repository root when run from the source tree: fcop_ros/ros/config.py -> three levels up.
+_SOURCE_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def config_path(name: str = "fcop.yaml") -> str:
@@ -21,7 +23,7 @@ def config_path(name: str = "fcop.yaml") -> str:
     except ImportError:
         pass
     candidates.append(os.path.join(sys.prefix, "share", _PACKAGE, "config", name))
-    candidates.append(os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config", name))
+    candidates.append(os.path.join(_SOURCE_ROOT, "config", name))
     for path in candidates:
         if os.path.isfile(path):
             return path

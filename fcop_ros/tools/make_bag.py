@@ -14,12 +14,12 @@ import sys
 import time
 
 from msg_adapters import (DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS, camera_info, depth_to_image,
-                          mask_to_image, nocs_to_image, pose_array)
+                          header_from_ns, mask_to_image, nocs_to_image, pose_array)
 
 from .bagio import COMPRESSIONS, STORAGES, BagError, BagWriter
 from .cli import HelpFormatter
-from .core.pose import ObjectPose
-from .synthetic import PRESETS, SequenceSpec, camera_sequence
+from ..core.pose import ObjectPose
+from ..synthetic import PRESETS, SequenceSpec, camera_sequence
 
 TOPICS = dict(depth="/camera/depth", nocs="/camera/nocs", mask="/camera/mask",
               truth="/camera/camera_info_true", poses="/camera/object_poses_true")
@@ -32,7 +32,6 @@ def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0, sto
              compression: str = "none") -> int:
     """Write the bag; returns the number of frames. Stamps start at ``start_ns``, 1/rate apart.
     ``progress(frames written)`` is called after every frame."""
-    from std_msgs.msg import Header
 
     if not rate > 0:
         raise ValueError("rate must be > 0 Hz")
@@ -41,8 +40,7 @@ def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0, sto
     with BagWriter(path, storage, compression) as bag:
         for k, frame in camera_sequence(spec, seed):
             stamp = start_ns + k * step
-            h = Header(frame_id=FRAME_ID)
-            h.stamp.sec, h.stamp.nanosec = divmod(stamp, 1_000_000_000)
+            h = header_from_ns(stamp, FRAME_ID)
             bag.write(TOPICS["depth"], depth_to_image(frame.depth, depth_encoding, h, depth_scale), stamp)
             bag.write(TOPICS["nocs"], nocs_to_image(frame.nocs, nocs_encoding, h), stamp)
             bag.write(TOPICS["mask"], mask_to_image(frame.mask, mask_encoding, h), stamp)

@@ -10,8 +10,8 @@ from pathlib import Path
 
 from .cli import HelpFormatter
 from .make_bag import TOPICS, make_bag
-from .replay import replay
-from .synthetic import PRESETS, SequenceSpec
+from .replay_offline import replay
+from ..synthetic import PRESETS, SequenceSpec
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     from .bagio import BagError
-    from .replay import OutputError, ReplayError
+    from .replay_base import ReplayError
 
     args = build_parser().parse_args(argv)
     out = Path(args.out)

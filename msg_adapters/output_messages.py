@@ -10,11 +10,6 @@ from sensor_msgs.msg import CameraInfo
 from visualization_msgs.msg import Marker, MarkerArray
 
 
-def stamp_ns(msg) -> int:
-    """The header stamp of a message (anything with .header.stamp) in integer nanoseconds."""
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-
-
 def camera_info(focal: float, cx: float, cy: float, width: int, height: int,
                 header=None) -> CameraInfo:
     """REP-104 CameraInfo of a pinhole camera with fx = fy = focal and no distortion.

@@ -130,7 +130,7 @@ def write_frame(prefix: Path, depth: np.ndarray, nocs: np.ndarray, mask: np.ndar
 def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None, use_principal_point=True,
              progress=None, **options):
     """Estimate every frame; return (rows, per-scene medians) and write the per-frame CSV."""
-    from .core import estimate_focal
+    from ..core import estimate_focal
 
     root = Path(root)
     if not root.is_dir():

@@ -1,4 +1,5 @@
-"""sensor_msgs/Image <-> numpy for depth, NOCS and instance masks, without cv_bridge.
+"""The input side: sensor_msgs/Image <-> numpy for depth, NOCS and instance masks, without
+cv_bridge, and header stamps <-> integer nanoseconds (how the node and tools key frames).
 
 Reading honours ``step`` (row padding) and ``is_bigendian`` and never loops over pixels.
 Building writes ``Image.data`` as ``array.array('B', arr.tobytes())``, the fast path of the
@@ -15,7 +16,9 @@ import array
 import sys
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from sensor_msgs.msg import Image
+from std_msgs.msg import Header
 
 # encoding -> (numpy dtype without byte order, channels)
 _LAYOUT = {
@@ -152,3 +155,24 @@ def mask_to_image(mask: np.ndarray, encoding: str = "mono8", header=None) -> Ima
     if m.size and (m.min() < info.min or m.max() > info.max):
         raise ImageFormatError(f"mask: ids {m.min()}..{m.max()} do not fit encoding {encoding}")
     return array_to_image(m.astype(kind), encoding, header)
+
+
+def time_to_ns(t) -> int:
+    """A builtin_interfaces/Time (or anything with sec and nanosec) in integer nanoseconds."""
+    return t.sec * 1_000_000_000 + t.nanosec
+
+
+def time_from_ns(ns: int) -> Time:
+    """builtin_interfaces/Time of integer nanoseconds."""
+    sec, nanosec = divmod(int(ns), 1_000_000_000)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def stamp_ns(msg) -> int:
+    """The header stamp of a message (anything with .header.stamp) in integer nanoseconds."""
+    return time_to_ns(msg.header.stamp)
+
+
+def header_from_ns(stamp_ns: int, frame_id: str = "") -> Header:
+    """A std_msgs/Header stamped ``stamp_ns`` nanoseconds, in frame ``frame_id``."""
+    return Header(stamp=time_from_ns(stamp_ns), frame_id=frame_id)

@@ -1,0 +1,139 @@
+"""The node's /diagnostics status, built from a snapshot of its counters and state.
+
+Plain functions over plain data (no rclpy, no node), so each level and message can be tested
+alone: :class:`DiagnosticsInput` is what the node reads under its lock, :class:`RateWindow`
+turns successive readings into rates over the last few seconds, :func:`status_fields` decides
+level, message and key-values, :func:`diagnostic_status` wraps them in the message.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+
+
+@dataclass(frozen=True)
+class DiagnosticsInput:
+    """One reading of the node. ``window``: the window's current WindowEstimate; ``publishable``:
+    whether its focal is within max_uncertainty (CameraInfo goes out); ``busy_for`` / ``age``:
+    seconds the estimator has been busy with one frame / since it finished the last (None: idle /
+    never); ``processing_ms``: recent per-frame estimation times."""
+
+    now: float
+    window: object
+    publishable: bool
+    window_fill: str
+    max_uncertainty: float
+    max_estimate_age: float
+    matched: int
+    processed: int
+    skipped: int
+    sync_dropped: int
+    camera_info_published: int
+    busy_for: float | None = None
+    age: float | None = None
+    processing_ms: tuple = ()
+    rejected: dict = field(default_factory=dict)
+    warnings: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Rates:
+    """Frames matched, processed and skipped over the last ``span`` seconds, and their rates."""
+
+    span: float
+    matched: int
+    processed: int
+    skipped: int
+
+    @property
+    def frame_hz(self) -> float:
+        return self.matched / self.span if self.span > 0 else 0.0
+
+    @property
+    def estimator_hz(self) -> float:
+        return self.processed / self.span if self.span > 0 else 0.0
+
+
+class RateWindow:
+    """Rates over about the last ``seconds``: keeps the readings of successive diagnostics
+    messages and compares the newest with the oldest one still within reach."""
+
+    def __init__(self, seconds: float = 5.0):
+        self.seconds = seconds
+        self._samples: deque = deque()  # (time, matched, processed, skipped)
+
+    def add(self, now: float, matched: int, processed: int, skipped: int) -> Rates:
+        self._samples.append((now, matched, processed, skipped))
+        while len(self._samples) > 1 and now - self._samples[1][0] >= self.seconds:
+            self._samples.popleft()
+        t0, m0, p0, s0 = self._samples[0]
+        return Rates(now - t0, matched - m0, processed - p0, skipped - s0)
+
+
+def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
+    """(level, message, {key: value}) of the node's status: ERROR when the estimator is stalled,
+    WARN without a focal, with one held back by max_uncertainty, or when the estimator skipped
+    more frames than it estimated lately; else OK."""
+    win = d.window
+    std = getattr(win, "std_rel", None)
+    if d.busy_for is not None and d.busy_for > d.max_estimate_age:
+        level = ERROR
+        message = (
+            f"estimator stalled: busy with one frame for {d.busy_for:.1f} s (max_estimate_age "
+            f"{d.max_estimate_age} s); CameraInfo carries an estimate {d.age or 0:.1f} s old"
+        )
+    elif win.focal is None:
+        level, message = WARN, f"no focal estimate yet: {win.reason}"
+    elif not d.publishable:
+        level = WARN
+        message = (
+            f"focal {win.focal:.1f} px held back: std_rel "
+            f"{'unknown' if std is None else f'{std:.4f}'} above max_uncertainty "
+            f"{d.max_uncertainty}"
+        )
+    elif rates.skipped > rates.processed:
+        level = WARN
+        message = (
+            f"focal {win.focal:.1f} px; estimator behind: skipped {rates.skipped} of "
+            f"{rates.matched} frames in the last {rates.span:.1f} s"
+        )
+    else:
+        level, message = OK, f"focal {win.focal:.1f} px"
+    times = np.array(d.processing_ms) if d.processing_ms else np.zeros(1)
+    values = {
+        "focal_px": "" if win.focal is None else f"{win.focal:.3f}",
+        "std_rel": "" if std is None else f"{std:.5f}",
+        "max_uncertainty": str(d.max_uncertainty),
+        "support_votes": str(win.support),
+        "window_fill": d.window_fill,
+        "frame_rate_hz": f"{rates.frame_hz:.2f}",
+        "estimator_rate_hz": f"{rates.estimator_hz:.2f}",
+        "estimate_age_s": "" if d.age is None else f"{d.age:.2f}",
+        "estimator_busy_s": "" if d.busy_for is None else f"{d.busy_for:.2f}",
+        "frames_processed": str(d.processed),
+        "frames_skipped": str(d.skipped),
+        "camera_info_published": str(d.camera_info_published),
+        "sync_matched": str(d.matched),
+        "sync_dropped": str(d.sync_dropped),
+        "processing_ms_median": f"{np.median(times):.2f}",
+        "processing_ms_max": f"{np.max(times):.2f}",
+    }
+    values.update({f"rejected_{k}": str(v) for k, v in sorted(d.rejected.items())})
+    values.update({f"warning_{k}": str(v) for k, v in sorted(d.warnings.items())})
+    return level, message, values
+
+
+def diagnostic_status(
+    name: str, hardware_id: str, d: DiagnosticsInput, rates: Rates
+) -> DiagnosticStatus:
+    """The DiagnosticStatus message of :func:`status_fields`."""
+    level, message, values = status_fields(d, rates)
+    st = DiagnosticStatus(name=name, hardware_id=hardware_id, level=level, message=message)
+    st.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+    return st

@@ -1,0 +1,852 @@
+"""fcop_node: live focal length from depth, NOCS and instance-mask images.
+
+A thin shell around :mod:`fcop_ros.core`. Input side (subscription callbacks, cheap): every
+message passes the stamp check and the synchroniser (:mod:`fcop_ros.ros.sync`); every depth image
+that passes gets its CameraInfo at once, carrying the window's current estimate; every matched
+frame replaces the one in a one-slot hand-off. Estimator side (a worker thread): it takes the
+newest complete frame whenever it is free, estimates it, updates the sliding window (and with
+it the estimate the next depth images carry) and publishes that frame's poses and markers. So
+publishing never waits for the estimator, and the estimator never works on a backlog.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import os
+import sys
+import threading
+import time
+from collections import Counter, OrderedDict, deque
+from dataclasses import dataclass
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseArray
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.srv import SetCameraInfo
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
+
+from msg_adapters import (
+    ImageFormatError,
+    camera_info,
+    depth_from_image,
+    marker_array,
+    mask_from_image,
+    nocs_from_image,
+    object_poses,
+    pose_array,
+    stamp_ns,
+)
+
+from ..core import FocalWindow, estimate_focal
+from ..core.camera import image_centre
+from .calibration import default_calibration_path, write_calibration
+from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
+from .params import (
+    PARAMETERS,
+    SYNC_PARAMETERS,
+    WINDOW_PARAMETERS,
+    ParameterError,
+    allowed,
+    check_combination,
+    check_words,
+    descriptor,
+)
+from .sync import StampSynchronizer
+from .throttle import LogThrottle
+from .worker import LatestSlotWorker
+
+INPUTS = ("depth", "nocs", "mask")
+_WINDOW_OPTIONS = frozenset(inspect.signature(FocalWindow).parameters)
+
+
+@dataclass(frozen=True)
+class LatestEstimate:
+    """What the node published last: the CameraInfo of depth stamp ``stamp_ns`` (focal, principal
+    point, image size) and the window estimate behind it (``std_rel``, ``support`` votes,
+    ``frames`` in the window); ``objects``: the ObjectPoses of the newest processed frame, of this
+    stamp once that frame is processed."""
+
+    stamp_ns: int
+    focal: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+    std_rel: float | None
+    support: int
+    frames: int
+    objects: tuple = ()
+
+
+@dataclass(frozen=True)
+class NodeCounts:
+    """The node's counters at one moment: input messages ``received``, frames ``matched`` by the
+    synchroniser, ``processed`` by the estimator, ``published`` (poses and markers), ``skipped``
+    in the hand-off for newer ones, CameraInfo messages, and dropped input by reason."""
+
+    received: int
+    matched: int
+    processed: int
+    published: int
+    skipped: int
+    camera_info_published: int
+    rejected: dict
+
+
+class _Reject(Exception):
+    def __init__(self, reason: str, text: str):
+        super().__init__(text)
+        self.reason = reason
+
+
+@dataclasses.dataclass
+class _Publishable:
+    """The estimate depth images get their CameraInfo from: the window's, when within
+    max_uncertainty."""
+
+    focal: float
+    std_rel: float
+    width: int
+    height: int
+    window: object  # the WindowEstimate
+
+
+def _light(est):
+    """The frame estimate without its pixel data: what the window needs to re-evaluate it later."""
+    names = {f.name for f in dataclasses.fields(est)}
+    heavy = {"instances": [], "inlier_masks": None, "votes": np.zeros(0), "objects": []}
+    return dataclasses.replace(est, **{k: v for k, v in heavy.items() if k in names})
+
+
+class FcopNode(Node):
+    """The fcop_node ROS 2 node (see the package README for topics, parameters and the rules)."""
+
+    def __init__(self, node_name: str = "fcop_node", **kwargs):
+        self.worker = None  # destroy_node works even when the parameters are refused
+        super().__init__(node_name, **kwargs)
+        try:
+            self._declare_parameters()
+        except ParameterError:
+            Node.destroy_node(self)
+            raise
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        self._now = time.monotonic  # the clock of rates and ages; replaceable in tests
+        self.rejected: Counter = Counter()  # dropped input, by reason
+        self.warnings: Counter = Counter()  # accepted input that deserved a word, by reason
+        self._latest: LatestEstimate | None = None  # the last CameraInfo publication (see latest)
+        self.received = 0  # input messages
+        self.published = 0  # frames whose estimate was published (poses and markers)
+        self.camera_info_published = 0
+        # Matched frames replaced in the hand-off before the estimator took them.
+        self.handoff_dropped = 0
+        self.last_estimate = None  # the FocalEstimate of the newest processed frame
+        self._proc_times: deque = deque(maxlen=200)
+        self._rates = RateWindow(5.0)  # frame and estimator rates over 5 s, for diagnostics
+        self._throttle = LogThrottle(self.get_logger())
+        self._lock = threading.Lock()
+        self._pub_lock = threading.Lock()  # CameraInfo publication from the two threads
+        # The one-slot hand-off to the estimator thread; its clear() on every reset discards the
+        # frames taken before it. Started once the node is complete.
+        self.worker = LatestSlotWorker(
+            self._estimate_item,
+            self._on_worker_error,
+            now=lambda: self._now(),
+            name="fcop_estimator",
+        )
+        self._size = None  # (width, height) of the frames in the window
+        self._estimate: _Publishable | None = None
+        self._history: deque = deque()  # the window's frames, light, to re-evaluate later
+        self._last_objects: list = []
+        self._answered: OrderedDict = OrderedDict()  # depth stamps that got their CameraInfo
+        self._unanswered: OrderedDict = OrderedDict()  # depth stamps that came before an estimate
+        self._last_info_stamp = -1
+        self._cam_in: CameraInfo | None = None
+        self._warned_distortion = False
+        self._rng = np.random.default_rng(None if self.p["seed"] < 0 else int(self.p["seed"]))
+        self.sync = self._new_sync()
+        self._build_window(keep=False)
+
+        qos_in = QoSOverridingOptions.with_default_policies()
+        self._subs = [
+            self.create_subscription(
+                Image,
+                name,
+                lambda msg, i=i: self._on_image(i, msg),
+                qos_profile_sensor_data,
+                qos_overriding_options=qos_in,
+            )
+            for i, name in enumerate(INPUTS)
+        ]
+        self.sub_info_in = self.create_subscription(
+            CameraInfo,
+            "camera_info_in",
+            self._on_camera_info_in,
+            qos_profile_sensor_data,
+            qos_overriding_options=qos_in,
+        )
+        qos_out = QoSOverridingOptions.with_default_policies()
+        # Reliable, volatile, keep last 10, spelled out: the "system default" profile leaves the
+        # durability to the RMW, and Fast DDS then makes the writer transient local.
+        out = QoSProfile(
+            depth=10,
+            history=HistoryPolicy.KEEP_LAST,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.VOLATILE,
+        )
+        self.pub_info = self.create_publisher(
+            CameraInfo, "camera_info", out, qos_overriding_options=qos_out
+        )
+        self.pub_poses = self.create_publisher(
+            PoseArray, "object_poses", out, qos_overriding_options=qos_out
+        )
+        self.pub_markers = self.create_publisher(
+            MarkerArray, "object_markers", out, qos_overriding_options=qos_out
+        )
+        self.pub_latest = self._latched_publisher()
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.srv_reset = self.create_service(Trigger, "~/reset", self._on_reset)
+        self.srv_save = self.create_service(
+            Trigger, "~/save_calibration", self._on_save_calibration
+        )
+        self.set_info_client = (
+            self.create_client(SetCameraInfo, self.p["set_camera_info_service"])
+            if self.p["set_camera_info_service"]
+            else None
+        )
+        self._diag_timer = self.create_timer(
+            float(self.p["diagnostics_period"]), self.publish_diagnostics
+        )
+        self.worker.start()
+        self.get_logger().info(
+            f"fcop_node ready: inputs {[s.topic_name for s in self._subs]}, camera_info_in "
+            f"{self.sub_info_in.topic_name}, sync {self.p['sync_mode']}, "
+            f"window {self.p['window_frames']} frames"
+        )
+
+    # ----- parameters
+    def _declare_parameters(self) -> None:
+        """Declare every parameter with its descriptor (rclpy refuses a wrong type or range, turned
+        into one ParameterError line), then check what descriptors cannot say."""
+        overrides = getattr(self, "_parameter_overrides", {})
+        for name, spec in PARAMETERS.items():
+            given = overrides.get(name)
+            if given is not None and isinstance(spec.default, float) and type(given.value) is int:
+                # focal_min:=300 means 300.0
+                overrides[name] = Parameter(name, value=float(given.value))
+            try:
+                self.declare_parameter(name, spec.default, descriptor(name))
+            except ParameterException:
+                value = overrides[name].value if name in overrides else "?"
+                raise ParameterError(
+                    f"parameter {name}={value!r} is not allowed: {allowed(name)}"
+                ) from None
+        self.p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        for name, value in self.p.items():
+            check_words(name, value)
+        problem = check_combination(self.p)
+        if problem:
+            raise ParameterError(problem)
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        """rclpy has applied the descriptors (type, range, read-only); refuse what they cannot
+        express (a choice among words, a text rule, rules between parameters), then apply."""
+        new = dict(self.p)
+        try:
+            for prm in params:
+                if prm.name in PARAMETERS:
+                    check_words(prm.name, prm.value)
+                    new[prm.name] = prm.value
+        except ParameterError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        problem = check_combination(new, self._size)
+        if problem:
+            return SetParametersResult(successful=False, reason=problem)
+        changed = {k for k in new if new[k] != self.p.get(k)}
+        with self._lock:
+            self.p = new
+            if changed & SYNC_PARAMETERS:
+                self.sync.configure(
+                    new["queue_size"],
+                    new["sync_slop"] if new["sync_mode"] == "approximate" else 0.0,
+                )
+            if changed & set(WINDOW_PARAMETERS):
+                self._build_window(keep=True)
+            elif changed & {"max_uncertainty"}:
+                self._update_estimate_locked(self.window.current)
+        if "diagnostics_period" in changed:
+            self.destroy_timer(self._diag_timer)
+            self._diag_timer = self.create_timer(
+                float(new["diagnostics_period"]), self.publish_diagnostics
+            )
+        return SetParametersResult(successful=True)
+
+    def _new_sync(self) -> StampSynchronizer:
+        slop = self.p["sync_slop"] if self.p["sync_mode"] == "approximate" else 0.0
+        return StampSynchronizer(len(INPUTS), self.p["queue_size"], slop)
+
+    def _build_window(self, keep: bool) -> None:
+        """A window with the current settings; with ``keep``, the old window's frames re-evaluated
+        in it."""
+        frames = list(self._history) if keep else []
+        options = dict(
+            max_frames=self.p["window_frames"],
+            max_age=self.p["window_seconds"] or None,
+            noise_bound=self.p["noise_bound"],
+            bound_mode=self.p["noise_bound_mode"],
+            min_frames=self.p["min_frames"],
+            min_support=self.p["min_support"],
+        )
+        # The window of the core rewrite weighs frames by their std_rel and takes no noise bound;
+        # pass what this FocalWindow accepts (the bound still shapes each frame's estimate).
+        self.window = FocalWindow(**{k: v for k, v in options.items() if k in _WINDOW_OPTIONS})
+        self._history = deque()
+        for est, t in frames:
+            self._add_to_window(est, t)
+        self._update_estimate_locked(self.window.current)
+
+    def _add_to_window(self, est, t: float):
+        win = self.window.add(est, t)
+        self._history.append((est, t))
+        while len(self._history) > len(self.window):
+            self._history.popleft()
+        return win
+
+    def _update_estimate_locked(self, win) -> None:
+        std = getattr(win, "std_rel", None)
+        if (
+            win.focal is None
+            or std is None
+            or std > self.p["max_uncertainty"]
+            or self._size is None
+        ):
+            self._estimate = None
+        else:
+            self._estimate = _Publishable(
+                float(win.focal), float(std), self._size[0], self._size[1], win
+            )
+
+    def _reset_locked(self) -> None:
+        self.window.reset()
+        self._history.clear()
+        self._estimate = None
+        self.worker.clear()
+
+    # ----- intrinsics other than f: parameters, camera_info_in, image centre
+    def _intrinsics(self, w: int, h: int):
+        """(cx, cy, D, distortion model, R) for a w x h image, or _Reject."""
+        p, cam = self.p, self._cam_in
+        if cam is not None and cam.width and cam.height and (cam.width, cam.height) != (w, h):
+            raise _Reject(
+                "camera_info_size_mismatch",
+                f"camera_info_in is {cam.width}x{cam.height}, the images are {w}x{h}",
+            )
+        use_cam = cam is not None and (cam.k[2] != 0 or cam.k[5] != 0)
+        cx = (
+            p["principal_point_x"]
+            if p["principal_point_x"] >= 0
+            else cam.k[2]
+            if use_cam
+            else image_centre(w, h)[0]
+        )
+        cy = (
+            p["principal_point_y"]
+            if p["principal_point_y"] >= 0
+            else cam.k[5]
+            if use_cam
+            else image_centre(w, h)[1]
+        )
+        if not (0 <= cx <= w - 1 and 0 <= cy <= h - 1):
+            raise _Reject(
+                "principal_point_outside",
+                f"principal point ({cx}, {cy}) is outside the {w}x{h} image",
+            )
+        if cam is not None and cam.distortion_model:
+            return (
+                float(cx),
+                float(cy),
+                [float(v) for v in cam.d],
+                cam.distortion_model,
+                [float(v) for v in cam.r],
+            )
+        return float(cx), float(cy), None, None, None
+
+    def _camera_info(self, focal: float, w: int, h: int, header):
+        cx, cy, d, model, r = self._intrinsics(w, h)
+        info = camera_info(focal, cx, cy, w, h, header)
+        if model is not None:
+            info.distortion_model, info.d = model, d
+            if any(r):
+                info.r = r
+        return info
+
+    def _on_camera_info_in(self, msg: CameraInfo) -> None:
+        with self._lock:
+            self._cam_in = msg
+        if any(v != 0 for v in msg.d) and not self._warned_distortion:
+            self._warned_distortion = True
+            self.get_logger().warning(
+                f"fcop_node: camera_info_in has non-zero distortion ({msg.distortion_model} "
+                f"D={list(msg.d)}): fCOP assumes a pinhole camera, feed it rectified images; the "
+                "output keeps D and the model"
+            )
+
+    # ----- input side: cheap, never waits for the estimator
+    def _on_image(self, index: int, msg: Image) -> None:
+        stamp = stamp_ns(msg)
+        with self._lock:
+            self.received += 1
+            before = Counter(self.sync.stats.dropped)
+            before_inputs = Counter(self.sync.stats.per_input)
+            resets = self.sync.stats.resets
+            sets = self.sync.add(index, stamp, msg)
+            accepted, outliers = self.sync.accepted, self.sync.outliers_dropped
+            new_drops = self.sync.stats.dropped - before
+            new_inputs = self.sync.stats.per_input - before_inputs
+            jumped = self.sync.stats.resets != resets
+            if jumped:  # before the new frames reach the worker
+                self._reset_locked()
+            for stamp_set, msgs in sets:
+                if self.worker.put((stamp_set, msgs)):
+                    self.handoff_dropped += 1
+                    self.rejected["estimator_busy"] += 1
+                    self._throttle.warn(
+                        "estimator_busy",
+                        "fcop_node: the estimator is slower than the input: "
+                        "skipped a frame (it works on the newest one)",
+                    )
+            for i, stamps, ref in outliers:
+                self.rejected[f"outlier_stamp_{INPUTS[i]}"] += len(stamps)
+        for i, stamps, ref in outliers:
+            self._throttle.warn(
+                f"outlier_{i}",
+                f"fcop_node: dropped {len(stamps)} {INPUTS[i]} message(s) with an "
+                f"outlier stamp ({', '.join(_sec(s) for s in stamps)}; the "
+                f"{INPUTS[i]} stamps before were at {_sec(ref)})",
+            )
+        for stamp_set, msgs in sets:
+            self._check_frame_ids(msgs)
+        for i, s, m in accepted:
+            if i == 0:
+                self._answer_depth(s, m)
+        if jumped:
+            self._throttle.warn(
+                "time_jump",
+                "fcop_node: time jumped back (looped bag?): synchroniser and window reset",
+            )
+        for reason, n in new_drops.items():
+            if reason == "outlier_stamp":  # counted per input above
+                continue
+            self._reject("sync_" + reason, n)
+            if reason == "time_jump_reset":
+                continue
+            which = ", ".join(
+                f"{INPUTS[i]} {k}" for (r, i), k in sorted(new_inputs.items()) if r == reason
+            )
+            self._throttle.warn(
+                "sync_" + reason,
+                f"fcop_node: dropped {n} message(s) in the synchroniser: "
+                f"{reason.replace('_', ' ')} ({which})",
+            )
+
+    def _check_frame_ids(self, msgs) -> None:
+        ids = [m.header.frame_id for m in msgs]
+        if not all(ids) or len(set(ids)) > 1:
+            reason = "frame_id_empty" if not all(ids) else "frame_id_mismatch"
+            with self._lock:
+                self.warnings[reason] += 1
+            self._throttle.warn(
+                reason,
+                "fcop_node: the inputs of one frame name different or empty frame_ids ("
+                + ", ".join(f"{n} {i!r}" for n, i in zip(INPUTS, ids))
+                + "): the outputs use the depth image's",
+            )
+
+    def _answer_depth(self, stamp: int, msg: Image) -> None:
+        """Publish the CameraInfo of one depth image with the current estimate, if there is one."""
+        with self._pub_lock:
+            if stamp in self._answered:
+                return
+            est = self._estimate
+            if est is None or (msg.width, msg.height) != (est.width, est.height):
+                self._remember(self._unanswered, stamp)
+                return
+            try:
+                info = self._camera_info(est.focal, est.width, est.height, msg.header)
+            except _Reject:
+                self._remember(self._unanswered, stamp)
+                return
+            self._publish_info(stamp, info, est.window, self._last_objects)
+
+    @staticmethod
+    def _remember(od: OrderedDict, stamp: int, keep: int = 256) -> None:
+        od[stamp] = True
+        while len(od) > keep:
+            od.popitem(last=False)
+
+    def _publish_info(self, stamp: int, info: CameraInfo, win, objects) -> None:
+        """Under self._pub_lock."""
+        self.pub_info.publish(info)
+        self.pub_latest.publish(info)
+        self.camera_info_published += 1
+        self._remember(self._answered, stamp)
+        self._unanswered.pop(stamp, None)
+        self._last_info_stamp = max(self._last_info_stamp, stamp)
+        self._latest = LatestEstimate(
+            stamp,
+            float(info.k[0]),
+            float(info.k[2]),
+            float(info.k[5]),
+            int(info.width),
+            int(info.height),
+            getattr(win, "std_rel", None),
+            int(win.support),
+            int(win.frames),
+            tuple(objects),
+        )
+
+    # ----- worker thread: conversions, estimation, poses
+    def _estimate_item(self, item, generation: int) -> None:
+        stamp, msgs = item
+        self.process(stamp, msgs, generation)
+
+    def _on_worker_error(self, item, exc: Exception) -> None:
+        """The node must outlive any single bad frame: count it and say which."""
+        self._reject("exception")
+        self._throttle.warn(
+            "exception", f"fcop_node: frame {item[0]} failed: {type(exc).__name__}: {exc}"
+        )
+
+    def _reject(self, reason: str, n: int = 1) -> None:
+        """Count dropped input; the worker and the executor thread both do, diagnostics reads."""
+        with self._lock:
+            self.rejected[reason] += n
+
+    def idle(self) -> bool:
+        """True when no frame is waiting or being estimated (used by replay and tests)."""
+        return self.worker.idle()
+
+    @property
+    def processed(self) -> int:
+        """Frames the estimator finished (failed ones included)."""
+        return self.worker.processed
+
+    @property
+    def latest(self) -> LatestEstimate | None:
+        """The last CameraInfo publication and the estimate behind it (None before the first)."""
+        with self._pub_lock:
+            return self._latest
+
+    @property
+    def window_estimate(self):
+        """The focal window's current WindowEstimate (whether or not within max_uncertainty)."""
+        with self._lock:
+            return self.window.current
+
+    @property
+    def counts(self) -> NodeCounts:
+        """The node's counters, read together."""
+        with self._lock:
+            return NodeCounts(
+                self.received,
+                self.sync.stats.matched,
+                self.worker.processed,
+                self.published,
+                self.handoff_dropped,
+                self.camera_info_published,
+                dict(self.rejected),
+            )
+
+    def process(self, stamp: int, msgs, generation: int | None = None) -> bool:
+        """Estimate one synchronised frame, update the window and publish the frame's poses and
+        markers; returns True when the window has a publishable estimate afterwards."""
+        t0 = time.perf_counter()
+        depth_msg, nocs_msg, mask_msg = msgs
+        p = self.p
+        try:
+            depth = depth_from_image(depth_msg, p["depth_scale"])
+            nocs = nocs_from_image(nocs_msg)
+            mask = mask_from_image(mask_msg)
+        except ImageFormatError as exc:
+            self._reject("bad_encoding")
+            self._throttle.warn("bad_encoding", f"fcop_node: rejected frame: {exc}")
+            return False
+        if not (depth.shape == nocs.shape[:2] == mask.shape):
+            self._reject("size_mismatch")
+            self._throttle.warn(
+                "size_mismatch",
+                f"fcop_node: rejected frame: image sizes differ: depth "
+                f"{depth.shape[::-1]}, nocs {nocs.shape[1::-1]}, mask {mask.shape[::-1]}",
+            )
+            return False
+        h, w = depth.shape
+        try:
+            with self._lock:
+                cx, cy, _, _, _ = self._intrinsics(w, h)
+        except _Reject as exc:
+            self._reject(exc.reason)
+            self._throttle.warn(exc.reason, f"fcop_node: rejected frame: {exc}")
+            return False
+        if p["nocs_convention"] == "nocs_dataset":
+            nocs = to_fcop_convention(nocs)
+        est = estimate_focal(
+            depth,
+            nocs,
+            mask,
+            (cx, cy),
+            triplets_per_object=p["triplets_per_object"],
+            noise_bound=p["noise_bound"],
+            bound_mode=p["noise_bound_mode"],
+            focal_range=(p["focal_min"], p["focal_max"]),
+            min_object_pixels=p["min_object_pixels"],
+            poses=False,
+            seed=int(self._rng.integers(2**31)),
+        )
+        if est.focal is None:
+            self._reject("no_evidence")
+            self._throttle.warn(
+                "no_evidence", f"fcop_node: frame without focal evidence: {est.reason}"
+            )
+        if est.mirrored:
+            with self._lock:
+                self.rejected["mirrored_nocs"] += len(est.mirrored)
+            self._throttle.warn(
+                "mirrored_nocs",
+                f"fcop_node: the NOCS of instance(s) {est.mirrored} fit their shape "
+                "only as a mirror image: is the nocs image's channel order right "
+                "(rgb8 vs bgr8), or its axis convention (parameter nocs_convention)? "
+                "The focal length is unaffected; no pose is published for them",
+            )
+        resized = None
+        with self._lock:
+            if generation is not None and generation != self.worker.generation:
+                return False  # taken before a reset
+            if self._size != (w, h):
+                resized, self._size = self._size, (w, h)
+                if resized is not None:
+                    self.window.reset()
+                    self._history.clear()
+            win = self._add_to_window(_light(est), stamp * 1e-9)
+            self._update_estimate_locked(win)
+            ready = self._estimate
+            self.last_estimate = est
+            self._proc_times.append(time.perf_counter() - t0)
+        if resized is not None:
+            self.get_logger().info(
+                f"fcop_node: image size changed from {resized[0]}x{resized[1]} to {w}x{h}: "
+                "new focal window"
+            )
+        if win.changed:
+            self.get_logger().info(
+                f"fcop_node: focal length changed (zoom?): window restarted at {win.focal}"
+            )
+        if ready is None:
+            return False
+        # This frame's depth image arrived before there was an estimate: answer it now.
+        with self._pub_lock:
+            if stamp in self._unanswered and stamp > self._last_info_stamp:
+                try:
+                    self._publish_info(
+                        stamp, self._camera_info(ready.focal, w, h, depth_msg.header), win, []
+                    )
+                except _Reject:
+                    pass
+        objects = []
+        if p["publish_poses"] or p["publish_markers"]:
+            # Poses at the window's focal length: steadier than the frame's own.
+            objects = est.poses_at(ready.focal) if est.focal is not None else []
+            poses = object_poses(objects)  # one quaternion conversion for both messages
+            if p["publish_poses"]:
+                self.pub_poses.publish(pose_array(objects, depth_msg.header, poses))
+            if p["publish_markers"]:
+                self.pub_markers.publish(marker_array(objects, depth_msg.header, poses=poses))
+        with self._pub_lock:
+            self._last_objects = objects
+            if self._latest is not None and self._latest.stamp_ns == stamp:
+                self._latest = dataclasses.replace(self._latest, objects=tuple(objects))
+        with self._lock:
+            self.published += 1
+        return True
+
+    # ----- services
+    def _latched_publisher(self):
+        latched = QoSProfile(
+            depth=1,
+            history=HistoryPolicy.KEEP_LAST,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        )
+        return self.create_publisher(CameraInfo, "~/latest_camera_info", latched)
+
+    def _on_reset(self, request, response):
+        with self._lock:
+            self._reset_locked()
+            self.sync.reset(clocks=True)
+        with self._pub_lock:  # a new publisher: late joiners get nothing from before the reset
+            self.destroy_publisher(self.pub_latest)
+            self.pub_latest = self._latched_publisher()
+            self._last_info_stamp = -1
+        response.success = True
+        response.message = "focal window, synchroniser, hand-off and latest_camera_info cleared"
+        self._throttle.info("reset", "fcop_node: reset by service")
+        return response
+
+    def calibration_path(self) -> str:
+        """Where ~/save_calibration writes: calibration_file, else camera_info_manager's
+        default."""
+        if self.p["calibration_file"]:
+            return os.path.expanduser(self.p["calibration_file"])
+        return default_calibration_path(self.p["camera_name"])
+
+    def _on_save_calibration(self, request, response):
+        with self._lock:
+            est, win = self._estimate, self.window.current
+            p = dict(self.p)
+        response.success = False
+        std = getattr(win, "std_rel", None)
+        if win.focal is None:
+            response.message = f"no focal estimate yet: {win.reason}"
+        elif std is None:
+            response.message = "the focal estimate has no uncertainty yet"
+        elif est is None:
+            response.message = f"std_rel {std:.4f} is above max_uncertainty {p['max_uncertainty']}"
+        if est is None:
+            self.get_logger().warning(f"fcop_node: calibration not saved: {response.message}")
+            return response
+        try:
+            with self._lock:
+                info = self._camera_info(est.focal, est.width, est.height, None)
+        except _Reject as exc:
+            response.message = str(exc)
+            return response
+        path = self.calibration_path()
+        try:
+            write_calibration(path, info, p["camera_name"])
+        except OSError as exc:
+            response.message = f"cannot write {path}: {exc.strerror or exc}"
+            self.get_logger().error(f"fcop_node: calibration not saved: {response.message}")
+            return response
+        response.success = True
+        response.message = f"saved focal {est.focal:.2f} px (std_rel {est.std_rel:.4f}) to {path}"
+        if self.set_info_client is not None:
+            if self.set_info_client.service_is_ready():
+                self.set_info_client.call_async(
+                    SetCameraInfo.Request(camera_info=info)
+                ).add_done_callback(self._on_set_camera_info_done)
+                response.message += f"; sent to {self.set_info_client.srv_name}"
+            else:
+                response.message += f"; {self.set_info_client.srv_name} is not available"
+        self.get_logger().info(f"fcop_node: {response.message}")
+        return response
+
+    def _on_set_camera_info_done(self, future) -> None:
+        res = future.result()
+        if res is None or not res.success:
+            self.get_logger().error(
+                f"fcop_node: {self.set_info_client.srv_name} refused the calibration: "
+                f"{getattr(res, 'status_message', 'no answer')}"
+            )
+        else:
+            self.get_logger().info(
+                f"fcop_node: {self.set_info_client.srv_name} took the calibration"
+            )
+
+    # ----- diagnostics
+    def diagnostic_status(self) -> DiagnosticStatus:
+        """The node's status now (what publish_diagnostics sends); see :mod:`.diagnostics`."""
+        now = self._now()
+        with self._lock:  # the worker thread updates these while we read
+            work = self.worker.state()
+            reading = DiagnosticsInput(
+                now=now,
+                window=self.window.current,
+                publishable=self._estimate is not None,
+                window_fill=f"{len(self.window)}/{self.p['window_frames']}",
+                max_uncertainty=self.p["max_uncertainty"],
+                max_estimate_age=self.p["max_estimate_age"],
+                matched=self.sync.stats.matched,
+                processed=work.processed,
+                skipped=self.handoff_dropped,
+                sync_dropped=self.sync.stats.dropped_total,
+                camera_info_published=self.camera_info_published,
+                busy_for=None if work.busy_since is None else now - work.busy_since,
+                age=None if work.last_done is None else now - work.last_done,
+                processing_ms=tuple(t * 1000 for t in self._proc_times),
+                rejected=dict(self.rejected),
+                warnings=dict(self.warnings),
+            )
+        rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped)
+        return diagnostic_status(
+            f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading, rates
+        )
+
+    def publish_diagnostics(self) -> DiagnosticArray:
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = [self.diagnostic_status()]
+        self.pub_diag.publish(msg)
+        return msg
+
+    def destroy_node(self):
+        if self.worker is not None:
+            self.worker.stop(timeout=5.0)
+        return super().destroy_node()
+
+
+def to_fcop_convention(nocs: np.ndarray) -> np.ndarray:
+    """NOCS of the NOCS dataset's convention (z flipped) in this package's: z = 1 - z on every
+    pixel with a prediction (all-zero pixels stay all-zero: no prediction)."""
+    out = np.array(nocs, dtype=np.float32, copy=True)
+    valid = np.any(out != 0, axis=2)
+    out[..., 2] = np.where(valid, 1.0 - out[..., 2], out[..., 2])
+    return out
+
+
+def _sec(stamp) -> str:
+    return "none" if stamp is None else f"{stamp / 1e9:.3f} s"
+
+
+def main(args=None) -> int:
+    """Entry point of ``ros2 run fcop_ros fcop_node``: spin until Ctrl-C or external shutdown.
+    Exit codes: 0 after a clean shutdown, 2 for a parameter it cannot run with (one line on
+    stderr)."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        # The executor exists before the node logs "ready", so an early Ctrl-C finds it whole.
+        executor = SingleThreadedExecutor()
+        node = FcopNode()
+        executor.add_node(node)
+        executor.spin()
+    except ParameterError as exc:
+        print(f"fcop_node: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

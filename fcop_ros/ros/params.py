@@ -1,0 +1,262 @@
+"""fcop_node's parameters: one table of named specs, their rclpy descriptors, and the rules.
+
+The table is the one place a parameter's default, meaning and allowed values are written; the
+node declares from it, fcop_replay checks a params file against it, and the tests check
+config/fcop.yaml and the README against it. rclpy enforces what a descriptor can say (type,
+numeric range, read-only) before any on-set callback runs; what it cannot say (a choice among
+words, a text rule) and the rules between parameters are checked here. No rclpy import.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+NOCS_CONVENTIONS = ("fcop", "nocs_dataset")
+_NAME = re.compile(r"[A-Za-z0-9_-]+")
+
+
+class ParameterError(ValueError):
+    """A parameter value fcop_node cannot run with; the message names it, its value and what
+    is allowed."""
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: its default (whose type is the parameter's type), a description, and at
+    most one of a numeric range, a set of choices or a text rule; ``read_only`` parameters are
+    set at start-up only."""
+
+    default: bool | int | float | str
+    description: str
+    range: tuple | None = None  # (min, max), both inclusive, for int and float parameters
+    choices: tuple = ()  # allowed words of a string parameter
+    text_rule: str = ""  # a rule a string must follow, in words (checked in check_value)
+    read_only: bool = False
+
+
+PARAMETERS: dict[str, ParamSpec] = {
+    "window_frames": ParamSpec(
+        30, "Frames in the sliding window of focal evidence.", range=(1, 1000)
+    ),
+    "window_seconds": ParamSpec(
+        0.0,
+        "Also forget frames older than this many seconds (0 = no age limit).",
+        range=(0.0, 3600.0),
+    ),
+    "triplets_per_object": ParamSpec(
+        1500, "Random triplets drawn on each object per frame.", range=(10, 100000)
+    ),
+    "noise_bound": ParamSpec(
+        0.05,
+        "Stabbing half-width: a fraction of f (relative mode) or pixels (absolute).",
+        range=(1e-4, 1000.0),
+    ),
+    "noise_bound_mode": ParamSpec(
+        "relative",
+        "'relative' (log f, same meaning at every focal) or 'absolute' (pixels).",
+        choices=("relative", "absolute"),
+    ),
+    "focal_min": ParamSpec(50.0, "Smallest focal length considered, pixels.", range=(1.0, 1e6)),
+    "focal_max": ParamSpec(20000.0, "Largest focal length considered, pixels.", range=(1.0, 1e6)),
+    "min_object_pixels": ParamSpec(
+        50, "Instances with fewer usable pixels are ignored.", range=(3, 10000000)
+    ),
+    "depth_scale": ParamSpec(
+        0.001,
+        "Metres per unit of 16UC1 depth images (REP-118: millimetres).",
+        range=(1e-9, 1000.0),
+    ),
+    "principal_point_x": ParamSpec(
+        -1.0,
+        "cx in pixels (inside the image); negative = from camera_info_in, else the image "
+        "centre (W-1)/2.",
+        range=(-1.0, 1e6),
+    ),
+    "principal_point_y": ParamSpec(
+        -1.0,
+        "cy in pixels (inside the image); negative = from camera_info_in, else the image "
+        "centre (H-1)/2.",
+        range=(-1.0, 1e6),
+    ),
+    "sync_mode": ParamSpec(
+        "exact",
+        "'exact' (equal stamps) or 'approximate' (within sync_slop).",
+        choices=("exact", "approximate"),
+    ),
+    "sync_slop": ParamSpec(
+        0.01,
+        "Largest stamp difference within a frame in approximate mode, seconds.",
+        range=(0.0, 1.0),
+    ),
+    "queue_size": ParamSpec(
+        5, "Messages per input waiting in the synchroniser for the other inputs.", range=(1, 100)
+    ),
+    "publish_poses": ParamSpec(True, "Publish object_poses (geometry_msgs/PoseArray)."),
+    "publish_markers": ParamSpec(True, "Publish object_markers (visualization_msgs/MarkerArray)."),
+    "min_frames": ParamSpec(
+        1, "Frames the window needs before it reports a focal length.", range=(1, 1000)
+    ),
+    "min_support": ParamSpec(
+        30,
+        "Agreeing triplet votes the window needs before it reports a focal length.",
+        range=(1, 10000000),
+    ),
+    "max_uncertainty": ParamSpec(
+        0.05,
+        "Largest relative standard error (std_rel) of the window's focal length at which "
+        "CameraInfo is published and a calibration saved.",
+        range=(1e-6, 1.0),
+    ),
+    "diagnostics_period": ParamSpec(
+        1.0, "Seconds between /diagnostics messages.", range=(0.05, 60.0)
+    ),
+    "max_estimate_age": ParamSpec(
+        2.0,
+        "Diagnostics go ERROR when the estimator has been busy with one frame for longer "
+        "than this many seconds (stalled).",
+        range=(0.1, 3600.0),
+    ),
+    "nocs_convention": ParamSpec(
+        "fcop",
+        "Axes of the NOCS input: 'fcop' (this package's) or 'nocs_dataset' (the NOCS "
+        "dataset's: z = 1 - z).",
+        choices=NOCS_CONVENTIONS,
+    ),
+    "camera_name": ParamSpec(
+        "camera",
+        "Camera name in the file ~/save_calibration writes.",
+        text_rule="letters, digits, _ and -",
+    ),
+    "calibration_file": ParamSpec(
+        "",
+        "File ~/save_calibration writes ('' = ~/.ros/camera_info/<camera_name>.yaml).",
+        text_rule="a file path",
+    ),
+    "set_camera_info_service": ParamSpec(
+        "",
+        "sensor_msgs/srv/SetCameraInfo service ~/save_calibration also calls, e.g. the "
+        "driver's set_camera_info ('' = none). Read-only.",
+        text_rule="a service name",
+        read_only=True,
+    ),
+    "seed": ParamSpec(
+        -1,
+        "Random seed of triplet sampling (-1 = from the OS). Read-only.",
+        range=(-1, 2**31 - 1),
+        read_only=True,
+    ),
+}
+# Set once at start-up: refused at run time (the descriptor says read_only).
+READ_ONLY = frozenset(name for name, spec in PARAMETERS.items() if spec.read_only)
+SYNC_PARAMETERS = frozenset({"sync_mode", "sync_slop", "queue_size"})
+WINDOW_PARAMETERS = (
+    "window_frames",
+    "window_seconds",
+    "noise_bound",
+    "noise_bound_mode",
+    "min_frames",
+    "min_support",
+)
+
+
+def defaults() -> dict:
+    """{name: default} of every parameter."""
+    return {name: spec.default for name, spec in PARAMETERS.items()}
+
+
+def allowed(name: str) -> str:
+    """What parameter ``name`` accepts, in words."""
+    spec = PARAMETERS[name]
+    if isinstance(spec.default, bool):
+        return "true or false"
+    if spec.choices:
+        return "one of " + ", ".join(spec.choices)
+    if spec.range is not None:
+        kind = "an integer" if isinstance(spec.default, int) else "a number"
+        return f"{kind} in [{spec.range[0]}, {spec.range[1]}]"
+    return f"a string ({spec.text_rule})"
+
+
+def descriptor(name: str) -> ParameterDescriptor:
+    """The rclpy descriptor of parameter ``name``: description, read_only and numeric range (which
+    rclpy enforces), and the choices or text rule as additional_constraints (which it shows)."""
+    spec = PARAMETERS[name]
+    d = ParameterDescriptor(name=name, description=spec.description, read_only=spec.read_only)
+    if (
+        spec.range is not None
+        and isinstance(spec.default, int)
+        and not isinstance(spec.default, bool)
+    ):
+        d.integer_range = [
+            IntegerRange(from_value=int(spec.range[0]), to_value=int(spec.range[1]), step=1)
+        ]
+    elif spec.range is not None:
+        d.floating_point_range = [
+            FloatingPointRange(from_value=float(spec.range[0]), to_value=float(spec.range[1]))
+        ]
+    elif spec.choices:
+        d.additional_constraints = "one of: " + ", ".join(spec.choices)
+    elif spec.text_rule:
+        d.additional_constraints = spec.text_rule
+    return d
+
+
+def check_value(name: str, value):
+    """``value`` converted to the parameter's type (an integer for a double is taken), or
+    ParameterError naming name, value and what is allowed. Checks type and range as well as what
+    a descriptor cannot say, for values that did not pass through rclpy (start-up, tools)."""
+    spec = PARAMETERS[name]
+    default = spec.default
+    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if type(value) is not type(default):
+        raise ParameterError(f"parameter {name}={value!r} is not allowed: {allowed(name)}")
+    if isinstance(value, bool):
+        ok = True
+    elif spec.choices:
+        ok = value in spec.choices
+    elif spec.range is not None:
+        ok = spec.range[0] <= value <= spec.range[1]
+    elif name == "camera_name":
+        ok = bool(_NAME.fullmatch(value))
+    else:
+        ok = "\n" not in value
+    if not ok:
+        raise ParameterError(f"parameter {name}={value!r} is not allowed: {allowed(name)}")
+    return value
+
+
+def check_words(name: str, value) -> None:
+    """ParameterError if a string parameter's value breaks what its descriptor cannot enforce
+    (a choice among words, a text rule); rclpy has already checked its type."""
+    spec = PARAMETERS[name]
+    if spec.choices or spec.text_rule:
+        check_value(name, value)
+
+
+def check_combination(p: dict, image_size=None) -> str:
+    """What is wrong with a complete set of values together ('' if nothing); ``image_size``
+    (width, height), once known, bounds the principal point."""
+    if p["focal_min"] >= p["focal_max"]:
+        return (
+            f"parameter focal_min={p['focal_min']} is not allowed: it must be below "
+            f"focal_max={p['focal_max']}"
+        )
+    if p["noise_bound_mode"] == "relative" and not 0 < p["noise_bound"] <= 0.5:
+        return (
+            f"parameter noise_bound={p['noise_bound']} is not allowed: a fraction in (0, 0.5] in "
+            f"relative noise_bound_mode"
+        )
+    if image_size is not None:
+        for axis, size in (("x", image_size[0]), ("y", image_size[1])):
+            v = p[f"principal_point_{axis}"]
+            if v >= 0 and not v <= size - 1:
+                return (
+                    f"parameter principal_point_{axis}={v} is not allowed: inside the "
+                    f"{image_size[0]}x"
+                    f"{image_size[1]} image, [0, {size - 1}] (or negative for the default)"
+                )
+    return ""

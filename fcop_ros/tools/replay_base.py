@@ -1,0 +1,94 @@
+"""What fcop_replay's parts share: the errors that set the exit code, the guard that turns a
+failed write into an OutputError, the check that a bag has the topics asked for, and the
+summary of an offline run (which the CSV, the report and the command line fill and read)."""
+
+from __future__ import annotations
+
+import sqlite3
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .bagio import BagSource
+
+IMAGE_TYPE = "sensor_msgs/msg/Image"
+INFO_TYPE = "sensor_msgs/msg/CameraInfo"
+
+
+class ReplayError(RuntimeError):
+    """A replay that cannot run as asked (bad bag, topic, type, encoding or parameter): exit 2."""
+
+
+class OutputError(ReplayError):
+    """An output that cannot be written (read-only, not a directory, disk full): exit 4."""
+
+
+@contextmanager
+def writing(what):
+    """Turn a failed write of an output into OutputError naming the output and the reason."""
+    try:
+        yield
+    except (OSError, sqlite3.Error) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+        raise OutputError(f"cannot write {what}: {reason}") from exc
+
+
+def check_topics(source: BagSource, wanted: dict) -> None:
+    """wanted: {role: (topic, expected type)}; raise ReplayError naming what the bag has
+    instead."""
+    for role, (topic, msgtype) in wanted.items():
+        if topic not in source.topics:
+            raise ReplayError(
+                f"{role} topic {topic!r} is not in the bag; it has: {source.describe()}"
+            )
+        if source.topics[topic] != msgtype:
+            raise ReplayError(
+                f"{role} topic {topic!r} has type {source.topics[topic]}, expected {msgtype}"
+            )
+
+
+@dataclass
+class ReplaySummary:
+    """What a replay did: counts, errors against truth (percent), speed, outputs, damage."""
+
+    frames_read: int = 0
+    frames_estimated: int = 0
+    errors_pct: list = field(default_factory=list)
+    seconds: float = 0.0
+    out_dir: str = ""
+    damaged: str = ""
+    rejected: dict = field(default_factory=dict)
+    csv_rows: int = 0
+
+    @property
+    def fps(self) -> float:
+        return self.frames_read / self.seconds if self.seconds > 0 else 0.0
+
+    def text(self) -> str:
+        lines = [
+            f"frames read       {self.frames_read}",
+            f"frames estimated  {self.frames_estimated}",
+        ]
+        if self.errors_pct:
+            e = np.abs(np.asarray(self.errors_pct))
+            lines.append(
+                f"focal error       median {np.median(e):.2f}%, "
+                f"90th percentile {np.percentile(e, 90):.2f}%"
+                f" (over {e.size} estimates with truth)"
+            )
+        lines.append(f"throughput        {self.fps:.1f} frames/s ({self.seconds:.1f} s)")
+        if self.rejected:
+            lines.append(
+                "rejected inputs   "
+                + ", ".join(f"{k}: {v}" for k, v in sorted(self.rejected.items()))
+            )
+        if self.damaged:
+            lines.append(
+                f"bag damaged       {self.damaged}; outputs hold what was estimated before"
+            )
+        lines.append(
+            f"outputs           {self.out_dir}/estimates.csv, {self.out_dir}/fcop_output/, "
+            f"{self.out_dir}/report.png"
+        )
+        return "\n".join(lines)

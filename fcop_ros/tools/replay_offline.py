@@ -1,0 +1,353 @@
+"""fcop_replay's offline driver: a bag's image topics through the real FcopNode in this process,
+one message at a time, into estimates.csv, an output bag and report.png (fcop_replay --help)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from ..ros.dds import use_large_image_profile
+from ..ros.spin import spin_until as spin
+from .bagio import BagError, BagSource, BagWriter
+from .estimates_csv import EstimatesCsv
+from .replay_base import (
+    IMAGE_TYPE,
+    INFO_TYPE,
+    OutputError,
+    ReplayError,
+    ReplaySummary,
+    check_topics,
+    writing,
+)
+from .replay_params import node_parameters
+from .report import write_report
+
+NODE_NAMESPACE = "/fcop"
+
+
+def _check_encoding(role: str, msg) -> None:
+    from msg_adapters import DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS
+
+    supported = {"depth": DEPTH_ENCODINGS, "nocs": NOCS_ENCODINGS, "mask": MASK_ENCODINGS}[role]
+    if msg.encoding not in supported:
+        raise ReplayError(
+            f"{role} topic: unsupported encoding {msg.encoding!r}; "
+            f"supported: {', '.join(supported)}"
+        )
+
+
+def _node_args(inputs: dict) -> list[str]:
+    args = ["--ros-args", "-r", f"__ns:={NODE_NAMESPACE}"]
+    for role, topic in inputs.items():
+        args += ["-r", f"{role}:={topic}"]
+    return args
+
+
+def _prepare_out(out_dir) -> Path:
+    """Create --out (a directory) and clear a previous output bag; OutputError if impossible."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out {out} exists and is not a directory")
+    with writing(f"--out {out}"):
+        out.mkdir(parents=True, exist_ok=True)
+    out_bag = out / "fcop_output"
+    if out_bag.is_dir() and not out_bag.is_symlink():
+        import shutil
+
+        with writing(f"{out_bag} (removing the previous output bag)"):
+            shutil.rmtree(out_bag)
+    elif out_bag.exists() or out_bag.is_symlink():
+        with writing(f"{out_bag} (removing the previous output bag)"):
+            out_bag.unlink()
+    return out
+
+
+def replay(
+    bag,
+    depth_topic: str,
+    nocs_topic: str,
+    mask_topic: str,
+    out_dir,
+    *,
+    truth_topic: str | None = None,
+    params_file: str | None = None,
+    overrides=(),
+    out_storage: str = "mcap",
+    progress: bool | None = None,
+    timeout: float = 60.0,
+) -> ReplaySummary:
+    """Offline replay (see the module docstring). Raises ReplayError/BagError for unusable input
+    or parameters (before anything runs), OutputError when an output cannot be written (its
+    message says what was lost); a bag damaged part-way is reported in the summary and its
+    outputs keep what came before."""
+    params = node_parameters(params_file, overrides)
+    use_large_image_profile()
+    import rclpy
+    from geometry_msgs.msg import PoseArray
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import qos_profile_sensor_data
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import CameraInfo, Image
+    from visualization_msgs.msg import MarkerArray
+
+    from msg_adapters import stamp_ns
+
+    from ..ros.node import FcopNode
+
+    inputs = {"depth": depth_topic, "nocs": nocs_topic, "mask": mask_topic}
+    source = BagSource(bag)
+    wanted = {role: (t, IMAGE_TYPE) for role, t in inputs.items()}
+    if truth_topic is not None:
+        wanted["truth"] = (truth_topic, INFO_TYPE)
+    summary = ReplaySummary()
+    try:
+        check_topics(source, wanted)
+        total = source.counts.get(depth_topic, 0)
+        if total == 0:
+            raise ReplayError(f"depth topic {depth_topic!r} has no messages")
+        out = _prepare_out(out_dir)
+        summary.out_dir = str(out)
+        table = EstimatesCsv(out / "estimates.csv", truth_topic is not None, summary)
+    except BaseException:
+        source.close()
+        raise
+    out_bag = out / "fcop_output"
+    role_of = {v: k for k, v in inputs.items()}
+    rows: list[dict] = []
+    checked = set()
+    state = {
+        "node": None,
+        "feeder": None,
+        "executor": None,
+        "writer": None,
+        "bar": None,
+        "bag_failed": False,
+    }
+
+    ctx = Context()
+    rclpy.init(context=ctx, args=[])
+    t0 = time.perf_counter()
+    sent = 0
+
+    def run():
+        nonlocal sent
+        executor = state["executor"] = SingleThreadedExecutor(context=ctx)
+        try:
+            node = state["node"] = FcopNode(
+                context=ctx,
+                cli_args=_node_args(inputs),
+                parameter_overrides=[Parameter(k, value=v) for k, v in params.items()],
+            )
+        except Exception as exc:  # checked above already; the node's own refusal, as one line
+            text = (str(exc).strip().splitlines() or [type(exc).__name__])[-1]
+            raise ReplayError(f"fcop_node did not start: {text}") from None
+        feeder = state["feeder"] = Node("fcop_replay", context=ctx)
+        pubs = {
+            t: feeder.create_publisher(Image, t, qos_profile_sensor_data) for t in inputs.values()
+        }
+        outputs = {
+            "camera_info": node.pub_info.topic_name,
+            "object_poses": node.pub_poses.topic_name,
+            "object_markers": node.pub_markers.topic_name,
+        }
+        types = {
+            "camera_info": INFO_TYPE,
+            "object_poses": "geometry_msgs/msg/PoseArray",
+            "object_markers": "visualization_msgs/msg/MarkerArray",
+        }
+        got: dict[str, list] = {k: [] for k in outputs}
+        consumed = {k: 0 for k in outputs}
+        classes = {
+            "camera_info": CameraInfo,
+            "object_poses": PoseArray,
+            "object_markers": MarkerArray,
+        }
+        subs = [
+            feeder.create_subscription(classes[k], t, got[k].append, 100, raw=True)
+            for k, t in outputs.items()
+        ]
+        executor.add_node(node)
+        executor.add_node(feeder)
+
+        def spin_until(cond, limit=timeout):
+            """Spin until ``cond()`` holds; after ``limit`` s a ReplayError with the counts."""
+            if not spin(executor, cond, limit, step=0.01):
+                n = node.counts
+                raise ReplayError(
+                    "the node did not answer in time (is the machine overloaded?) "
+                    f"[received {n.received}/{sent}, matched {n.matched}, "
+                    f"processed {n.processed}, published {n.published}, "
+                    f"outputs {[len(v) for v in got.values()]}]"
+                )
+
+        if progress if progress is not None else sys.stderr.isatty():
+            from tqdm import tqdm
+
+            state["bar"] = tqdm(total=total, unit="frame", desc="fcop_replay", file=sys.stderr)
+        spin_until(
+            lambda: (
+                all(p.get_subscription_count() for p in pubs.values())
+                and all(s.get_publisher_count() for s in subs)
+            ),
+            30,
+        )
+        with writing(out_bag):
+            state["writer"] = BagWriter(out_bag, out_storage)
+            state["writer"].__enter__()
+        writer = state["writer"]
+
+        def drain():
+            """Write what the node published for the frames handed over so far."""
+
+            def caught_up():
+                n = node.counts
+                return n.processed >= n.matched and node.idle()
+
+            spin_until(caught_up)
+            publish = {
+                "camera_info": True,
+                "object_poses": node.get_parameter("publish_poses").value,
+                "object_markers": node.get_parameter("publish_markers").value,
+            }
+            wanted = [k for k, on in publish.items() if on]
+            spin_until(
+                lambda: all(consumed[k] + len(got[k]) >= node.counts.published for k in wanted)
+            )
+            for key in outputs:
+                consumed[key] += len(got[key])
+                for raw in got[key]:
+                    if key == "camera_info":
+                        info = deserialize_message(raw, CameraInfo)
+                        stamp = stamp_ns(info)
+                        row = _row(info, stamp, node)
+                        rows.append(row)
+                        summary.frames_estimated += 1
+                        table.add(row)
+                    else:
+                        stamp = rows[-1]["stamp_ns"] if rows else 0
+                    try:
+                        with writing(out_bag):
+                            writer.write_raw(outputs[key], types[key], bytes(raw), stamp)
+                    except OutputError:
+                        state["bag_failed"] = True
+                        raise
+                got[key].clear()
+
+        try:
+            for topic, _, raw in source.messages(
+                list(inputs.values()) + [truth_topic] * bool(truth_topic)
+            ):
+                if topic == truth_topic:
+                    info = deserialize_message(raw, CameraInfo)
+                    table.truth(stamp_ns(info), float(info.k[0]))
+                    continue
+                role = role_of[topic]
+                if role not in checked:
+                    _check_encoding(role, deserialize_message(raw, Image))
+                    checked.add(role)
+                pubs[topic].publish(raw)
+                sent += 1
+                spin_until(lambda: node.counts.received >= sent)
+                if role == "depth":
+                    summary.frames_read += 1
+                    if state["bar"] is not None:
+                        state["bar"].update(1)
+                drain()
+        except (ReplayError, BagError):
+            raise
+        except Exception as exc:  # a damaged or truncated bag: keep what came before
+            source.damaged = f"{type(exc).__name__}: {exc}"
+        drain()
+        summary.damaged = source.damaged
+
+    def finish(ok: bool) -> list[OutputError]:
+        """Close everything; never raises. Returns the outputs that could not be finished."""
+        problems = []
+
+        def step(fn):
+            try:
+                fn()
+            except OutputError as exc:
+                problems.append(exc)
+            except Exception:  # noqa: BLE001 - cleanup must not hide the real error
+                pass
+
+        summary.seconds = time.perf_counter() - t0
+        if state["bar"] is not None:
+            step(state["bar"].close)
+        if state["node"] is not None:
+            summary.rejected = state["node"].counts.rejected
+            step(state["node"].destroy_node)
+        if state["feeder"] is not None:
+            step(state["feeder"].destroy_node)
+        if state["executor"] is not None:
+            step(lambda: state["executor"].shutdown(timeout_sec=1.0))
+        step(ctx.try_shutdown)
+        step(source.close)
+        if state["writer"] is not None:
+
+            def close_bag():
+                try:
+                    with writing(out_bag):
+                        state["writer"].__exit__(None, None, None)
+                except OutputError:
+                    state["bag_failed"] = True
+                    raise
+
+            step(close_bag)
+        step(lambda: table.close(final=True))
+
+        def report():
+            with writing(out / "report.png"):
+                write_report(out / "report.png", rows, summary)
+
+        step(report)
+        return problems
+
+    def lost(problems) -> str:
+        parts = [
+            f"stopped after {summary.frames_read} of {total} frames",
+            f"estimates.csv holds {table.written} of {summary.frames_estimated} estimates",
+        ]
+        if state["bag_failed"]:
+            parts.append("the output bag is incomplete")
+        if any("report.png" in str(p) for p in problems):
+            parts.append("report.png not written")
+        return "; ".join(parts)
+
+    try:
+        run()
+    except OutputError as exc:
+        problems = finish(False)
+        raise OutputError(f"{exc}; {lost(problems)}") from None
+    except BaseException:
+        finish(False)
+        raise
+    problems = finish(True)
+    if problems:
+        raise OutputError(f"{problems[0]}; {lost(problems)}")
+    return summary
+
+
+def _row(info, stamp, node) -> dict:
+    """One estimates.csv row from a published CameraInfo and the window estimate behind it: the
+    node's latest publication when it is of this stamp, else the window's current estimate."""
+    latest = node.latest
+    if latest is not None and latest.stamp_ns == stamp:
+        std_rel, support, objects = latest.std_rel, latest.support, len(latest.objects)
+    else:
+        win = node.window_estimate
+        std_rel, support, objects = getattr(win, "std_rel", None), win.support, 0
+    return {
+        "stamp_ns": stamp,
+        "focal": float(info.k[0]),
+        "cx": float(info.k[2]),
+        "cy": float(info.k[5]),
+        "support": int(support),
+        "std_rel": float(std_rel) if std_rel is not None else None,
+        "objects": objects,
+    }

@@ -1,0 +1,180 @@
+"""fcop_replay's node parameters: ROS 2 parameter-file sections for any namespace, then every
+-p NAME:=VALUE, checked against fcop_node's parameter table before anything runs."""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+
+import yaml
+
+from ..ros.config import config_path
+from .replay_base import ReplayError
+
+NODE_NAME = "fcop_node"
+
+
+_ROS_PARAMETERS = ("use_sim_time", "start_type_description_service")
+
+
+def _sections(doc, prefix=""):
+    """(key, ros__parameters) of every node section of a parameter file, nested namespaces
+    joined."""
+    for key, body in doc.items():
+        if not isinstance(body, dict):
+            raise ReplayError(f"section {prefix + str(key)!r} is not a mapping")
+        full = f"{prefix}{key}"
+        if "ros__parameters" in body:
+            if not isinstance(body["ros__parameters"], dict):
+                raise ReplayError(f"section {full!r}: ros__parameters is not a mapping")
+            yield full, body["ros__parameters"]
+        else:
+            yield from _sections(body, full.rstrip("/") + "/")
+
+
+def _applies(key: str, node_name: str) -> bool:
+    """Does a parameter-file section apply to the replayed node? Its last name must be the node's
+    or a wildcard: the namespace part is ignored, because the replayed node stands in for the
+    user's node wherever that runs ('/**', '/**/fcop_node', 'fcop_node', '/camera/fcop_node')."""
+    last = key.strip("/").split("/")[-1] if key.strip("/") else ""
+    return last in (node_name, "*", "**")
+
+
+def _flatten(params: dict, prefix="") -> dict:
+    out = {}
+    for k, v in params.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def load_params_file(path, node_name: str = NODE_NAME) -> dict:
+    """{name: value} of every section of a ROS 2 parameter file that applies to ``node_name``
+    (see :func:`_applies`); wildcard sections first so the node's own values win."""
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise ReplayError(f"cannot read --params-file {path}: {exc.strerror or exc}") from None
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        where = getattr(exc, "problem_mark", None)
+        at = f" (line {where.line + 1})" if where is not None else ""
+        raise ReplayError(
+            f"--params-file {path} is not valid YAML{at}: {getattr(exc, 'problem', exc)}"
+        ) from None
+    if not isinstance(doc, dict):
+        raise ReplayError(
+            f"--params-file {path} is not a ROS 2 parameter file "
+            f"(expected '/**:' or '{node_name}:' with 'ros__parameters:' under it)"
+        )
+    try:
+        sections = [(k, v) for k, v in _sections(doc) if _applies(k, node_name)]
+    except ReplayError as exc:
+        raise ReplayError(f"--params-file {path}: {exc}") from None
+    if not sections:
+        raise ReplayError(
+            f"--params-file {path} has no section for {node_name} (it has: "
+            f"{', '.join(str(k) for k in doc) or 'nothing'}); key it '/**:' or '{node_name}:'"
+        )
+    sections.sort(key=lambda kv: 0 if "*" in kv[0] else 1)
+    values = {}
+    for _, params in sections:
+        values.update(_flatten(params))
+    return values
+
+
+_TRUE = {"true", "True", "TRUE", "yes", "Yes", "YES", "on", "On", "ON"}
+_FALSE = {"false", "False", "FALSE", "no", "No", "NO", "off", "Off", "OFF"}
+
+
+def parse_value(text: str):
+    """A -p value typed as rcl types it: bool words, integer, double (1e3 too), [lists], else
+    a string."""
+    if text in _TRUE:
+        return True
+    if text in _FALSE:
+        return False
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    if text.startswith("["):
+        try:
+            return yaml.safe_load(text)
+        except yaml.YAMLError:
+            pass
+    if len(text) >= 2 and text[0] == text[-1] and text[0] in "'\"":
+        return text[1:-1]
+    return text
+
+
+def parse_overrides(overrides) -> dict:
+    values = {}
+    for item in overrides or ():
+        name, sep, text = item.partition(":=")
+        if not sep or not name:
+            raise ReplayError(f"-p expects NAME:=VALUE, got {item!r}")
+        if text == "":
+            raise ReplayError(f"-p {name}:= has no value")
+        values[name] = parse_value(text)
+    return values
+
+
+def check_parameters(values: dict, where: dict) -> dict:
+    """Check names, types, ranges and choices against fcop_node's declared parameters; return the
+    values with integers given for double parameters made doubles. ``where`` names the source."""
+    from ..ros.params import PARAMETERS, check_combination, defaults
+
+    known = sorted(PARAMETERS)
+    out = {}
+    for name, value in values.items():
+        src = where.get(name, "")
+        if name in _ROS_PARAMETERS or name.startswith("qos_overrides."):
+            out[name] = value
+            continue
+        if name not in PARAMETERS:
+            close = difflib.get_close_matches(name, known, n=1)
+            hint = f" (did you mean {close[0]}?)" if close else ""
+            raise ReplayError(
+                f"unknown parameter {name!r} from {src}{hint}; fcop_node's parameters: "
+                f"{', '.join(known)}"
+            )
+        spec = PARAMETERS[name]
+        default = spec.default
+        if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if type(value) is not type(default):
+            raise ReplayError(
+                f"parameter {name} from {src} must be {type(default).__name__}, got {value!r}"
+            )
+        lo, hi = spec.range or (None, None)
+        if spec.range is not None and not isinstance(value, bool) and not lo <= value <= hi:
+            raise ReplayError(f"parameter {name}={value} from {src} is outside [{lo}, {hi}]")
+        if spec.choices and value not in spec.choices:
+            raise ReplayError(
+                f"parameter {name}={value!r} from {src} must be one of: {', '.join(spec.choices)}"
+            )
+        out[name] = value
+
+    full = defaults()
+    full.update({k: v for k, v in out.items() if k in PARAMETERS})
+    problem = check_combination(full)
+    if problem:
+        raise ReplayError(f"invalid parameters: {problem}")
+    return out
+
+
+def node_parameters(params_file: str | None, overrides=()) -> dict:
+    """The checked parameters the replayed node gets: the params file (default: the package's
+    config/fcop.yaml), then the -p overrides."""
+    path = params_file if params_file is not None else config_path()
+    values = load_params_file(path)
+    where = {k: f"--params-file {path}" for k in values}
+    cli = parse_overrides(overrides)
+    values.update(cli)
+    where.update({k: "-p" for k in cli})
+    return check_parameters(values, where)

@@ -1,0 +1,133 @@
+"""fcop_replay --play: publish a bag's image topics with the recorded timing, and the recorded time
+on /clock, as `ros2 bag play --clock` would, for a live node."""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+from ..ros.dds import use_large_image_profile
+from .bagio import BagSource
+from .replay_base import IMAGE_TYPE, ReplayError, check_topics
+
+
+@dataclass
+class PlayResult:
+    """What a --play run did: messages published, /clock messages, and the damage it met."""
+
+    published: int = 0
+    clock: int = 0
+    damaged: str = ""
+
+
+def _readable(source: BagSource, topics):
+    """The bag's messages up to the first damage (then ``source.damaged`` says what it was)."""
+    it = source.messages(topics)
+    while True:
+        try:
+            item = next(it)
+        except StopIteration:
+            return
+        except Exception as exc:  # a damaged storage read through rosbags: stop here, say why
+            source.damaged = source.damaged or f"{type(exc).__name__}: {exc}"
+            return
+        yield item
+
+
+def play(
+    bag,
+    image_topics,
+    *,
+    rate: float = 1.0,
+    loop: bool = False,
+    context=None,
+    stop: threading.Event | None = None,
+    qos_depth: int = 10,
+    clock: bool = True,
+    clock_hz: float = 40.0,
+) -> PlayResult:
+    """Publish the bag's messages of ``image_topics`` with the recorded timing scaled by ``rate``.
+
+    With ``clock`` the bag's time goes out on /clock (rosgraph_msgs/Clock), as `ros2 bag play
+    --clock` does: the recorded time of every message just before it, and in between at
+    ``clock_hz`` (0: only at the messages), so nodes with use_sim_time follow the bag. ``context``
+    is an initialised rclpy Context (default: the global one, initialised here); ``stop`` ends
+    playback early. A damaged bag is played up to the damage (``PlayResult.damaged``)."""
+    import rclpy
+    from rclpy.node import Node
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import Image
+
+    from msg_adapters import time_from_ns
+
+    if not rate > 0:
+        raise ReplayError("--rate must be > 0")
+    if clock_hz < 0:
+        raise ReplayError("--clock-hz must be >= 0")
+    source = BagSource(bag)
+    try:
+        check_topics(
+            source, {f"image {i + 1}": (t, IMAGE_TYPE) for i, t in enumerate(image_topics)}
+        )
+    except ReplayError:
+        source.close()
+        raise
+    own = context is None
+    if own:
+        use_large_image_profile()
+        rclpy.init()
+    node = Node("fcop_player", context=context)
+    pubs = {t: node.create_publisher(Image, t, qos_depth) for t in image_topics}
+    clock_pub = node.create_publisher(Clock, "/clock", 10) if clock else None
+    stop = stop or threading.Event()
+    result = PlayResult()
+    last_clock = [None]
+
+    def tick(ns: int) -> None:
+        if last_clock[0] is not None and ns <= last_clock[0]:
+            return
+        msg = Clock()
+        msg.clock = time_from_ns(ns)
+        clock_pub.publish(msg)
+        last_clock[0] = ns
+        result.clock += 1
+
+    def wait_until(due: float, start_wall: float, start_bag: int, ts: int) -> bool:
+        """Sleep until ``due`` (monotonic), ticking /clock meanwhile; False when stopped."""
+        period = 1.0 / clock_hz if clock_pub is not None and clock_hz > 0 else None
+        while True:
+            left = due - time.monotonic()
+            if left <= 0:
+                return True
+            if stop.wait(min(left, period) if period else left):
+                return False
+            if period and time.monotonic() < due:
+                tick(min(ts, start_bag + int((time.monotonic() - start_wall) * rate * 1e9)))
+
+    try:
+        while not stop.is_set():
+            start_wall, start_bag = None, None
+            last_clock[0] = None  # a loop starts the bag's time over, as rosbag2 does
+            for topic, ts, raw in _readable(source, image_topics):
+                if stop.is_set():
+                    break
+                if start_wall is None:
+                    start_wall, start_bag = time.monotonic(), ts
+                if not wait_until(
+                    start_wall + (ts - start_bag) * 1e-9 / rate, start_wall, start_bag, ts
+                ):
+                    break
+                if clock_pub is not None:
+                    tick(ts)
+                pubs[topic].publish(raw)
+                result.published += 1
+            result.damaged = source.damaged
+            if not loop or start_wall is None:
+                break
+    finally:
+        node.destroy_node()
+        source.close()
+        if own and rclpy.ok():
+            rclpy.shutdown()
+    return result

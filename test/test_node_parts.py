@@ -1,0 +1,296 @@
+"""The node's plain parts, each alone: the parameter schema, the one-slot worker and the
+diagnostics builder (no DDS, no node)."""
+
+import threading
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
+from rcl_interfaces.msg import ParameterType
+
+from fcop_ros.core import WindowEstimate
+from fcop_ros.ros.diagnostics import DiagnosticsInput, Rates, RateWindow, status_fields
+from fcop_ros.ros.params import (
+    PARAMETERS,
+    READ_ONLY,
+    ParameterError,
+    ParamSpec,
+    allowed,
+    check_combination,
+    check_value,
+    defaults,
+    descriptor,
+)
+from fcop_ros.ros.worker import LatestSlotWorker
+
+# ----- the parameter schema
+
+
+def test_every_spec_says_one_kind_of_limit_that_fits_its_type():
+    for name, spec in PARAMETERS.items():
+        assert isinstance(spec, ParamSpec) and spec.description, name
+        kinds = [spec.range is not None, bool(spec.choices), bool(spec.text_rule)]
+        assert sum(kinds) <= 1, name
+        if isinstance(spec.default, bool):
+            assert not any(kinds), name
+        elif isinstance(spec.default, (int, float)):
+            lo, hi = spec.range
+            assert lo <= spec.default <= hi and type(lo) is type(spec.default), name
+        else:
+            assert spec.choices or spec.text_rule, name
+            assert not spec.choices or spec.default in spec.choices, name
+        assert check_value(name, spec.default) == spec.default  # every default is allowed
+
+
+def test_descriptor_carries_range_and_read_only_for_rclpy_to_enforce():
+    d = descriptor("window_frames")
+    assert (d.integer_range[0].from_value, d.integer_range[0].to_value) == (
+        1,
+        1000,
+    ) and not d.read_only
+    d = descriptor("focal_min")
+    assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == (1.0, 1e6)
+    assert "relative" in descriptor("noise_bound_mode").additional_constraints
+    assert READ_ONLY == {"seed", "set_camera_info_service"} and all(
+        descriptor(n).read_only for n in READ_ONLY
+    )
+    # The type comes from the default at declaration: the descriptor leaves it unset.
+    assert descriptor("seed").type == ParameterType.PARAMETER_NOT_SET
+
+
+@pytest.mark.parametrize(
+    "name, value, words",
+    [
+        ("window_frames", 0, "an integer in [1, 1000]"),
+        ("window_frames", 2.5, "an integer in [1, 1000]"),
+        ("sync_mode", "fuzzy", "one of exact, approximate"),
+        ("camera_name", "my camera", "a string (letters, digits, _ and -)"),
+        ("publish_poses", "yes", "true or false"),
+    ],
+)
+def test_check_value_names_parameter_value_and_what_is_allowed(name, value, words):
+    with pytest.raises(ParameterError) as err:
+        check_value(name, value)
+    assert (
+        str(err.value) == f"parameter {name}={value!r} is not allowed: {words}"
+        and allowed(name) == words
+    )
+
+
+def test_an_integer_for_a_double_is_taken_as_a_double():
+    assert check_value("focal_min", 300) == 300.0 and type(check_value("focal_min", 300)) is float
+
+
+def test_combination_rules():
+    p = defaults()
+    assert check_combination(p) == ""
+    assert "below focal_max" in check_combination({**p, "focal_min": 30000.0})
+    assert "(0, 0.5]" in check_combination({**p, "noise_bound": 0.9})
+    assert check_combination({**p, "noise_bound": 0.9, "noise_bound_mode": "absolute"}) == ""
+    assert check_combination({**p, "principal_point_x": 700.0}) == ""  # image size not known yet
+    assert "[0, 639]" in check_combination({**p, "principal_point_x": 700.0}, (640, 480))
+
+
+# ----- the one-slot worker
+
+
+class _Gated:
+    """A handler that records what it gets and holds each item until released."""
+
+    def __init__(self):
+        self.got, self.go, self.started = [], threading.Event(), threading.Event()
+
+    def __call__(self, item, generation):
+        self.started.set()
+        assert self.go.wait(10)
+        self.got.append((item, generation))
+
+
+def _wait(cond, timeout=10.0):
+    done = threading.Event()
+    for _ in range(int(timeout / 0.01)):
+        if cond():
+            return True
+        done.wait(0.01)
+    return cond()
+
+
+def test_worker_skips_to_the_newest_item_and_counts_replacements():
+    handler = _Gated()
+    w = LatestSlotWorker(handler, on_error=lambda item, exc: None)
+    w.start()
+    try:
+        assert not w.put(1)
+        assert handler.started.wait(10) and w.busy_since is not None and not w.idle()
+        replaced = [w.put(k) for k in (2, 3, 4)]
+        assert replaced == [
+            False,
+            True,
+            True,
+        ]  # 2 waited, then 3 and 4 each replaced the waiting one
+        handler.go.set()
+        assert _wait(lambda: w.idle() and w.processed == 2)
+        assert [item for item, _ in handler.got] == [1, 4]
+        state = w.state()
+        assert state.busy_since is None and state.last_done is not None and not state.waiting
+    finally:
+        w.stop()
+
+
+def test_worker_clear_drops_the_waiting_item_and_starts_a_new_generation():
+    handler = _Gated()
+    w = LatestSlotWorker(handler, on_error=lambda item, exc: None)
+    w.start()
+    try:
+        w.put("a")
+        assert handler.started.wait(10)
+        w.put("b")
+        w.clear()
+        assert w.generation == 1 and w.state().waiting is False
+        w.put("c")
+        handler.go.set()
+        assert _wait(lambda: w.idle() and w.processed == 2)
+        assert handler.got == [("a", 0), ("c", 1)]  # "a" was taken before the clear: generation 0
+    finally:
+        w.stop()
+
+
+def test_worker_survives_a_failing_item_and_reports_it():
+    errors = []
+
+    def handle(item, generation):
+        if item == "bad":
+            raise ValueError("broken frame")
+
+    w = LatestSlotWorker(handle, on_error=lambda item, exc: errors.append((item, str(exc))))
+    w.start()
+    try:
+        w.put("bad")
+        assert _wait(lambda: w.processed == 1)
+        w.put("good")
+        assert _wait(lambda: w.processed == 2 and w.idle())
+        assert errors == [("bad", "broken frame")]
+    finally:
+        w.stop()
+    assert not w._thread.is_alive()
+
+
+# ----- the diagnostics builder
+
+
+def _reading(**kw):
+    base = {
+        "now": 10.0,
+        "window": WindowEstimate(600.0, std_rel=0.01, support=500, frames=5),
+        "publishable": True,
+        "window_fill": "5/30",
+        "max_uncertainty": 0.05,
+        "max_estimate_age": 2.0,
+        "matched": 20,
+        "processed": 20,
+        "skipped": 0,
+        "sync_dropped": 0,
+        "camera_info_published": 20,
+        "processing_ms": (10.0, 30.0, 20.0),
+    }
+    base.update(kw)
+    return DiagnosticsInput(**base)
+
+
+QUIET = Rates(span=5.0, matched=150, processed=150, skipped=0)
+
+
+def test_diagnostics_ok_reports_the_estimate_and_timing():
+    level, message, values = status_fields(_reading(rejected={"no_evidence": 2}), QUIET)
+    assert level == DiagnosticStatus.OK and message == "focal 600.0 px"
+    assert (
+        values["focal_px"] == "600.000"
+        and values["std_rel"] == "0.01000"
+        and values["support_votes"] == "500"
+    )
+    assert values["frame_rate_hz"] == "30.00" and values["processing_ms_median"] == "20.00"
+    assert values["processing_ms_max"] == "30.00" and values["rejected_no_evidence"] == "2"
+
+
+@pytest.mark.parametrize(
+    "reading, rates, level, words",
+    [
+        (
+            {"busy_for": 3.0, "age": 3.5},
+            QUIET,
+            DiagnosticStatus.ERROR,
+            "estimator stalled: busy with one frame for 3.0 s",
+        ),
+        (
+            {"window": WindowEstimate(None, reason="no frames")},
+            QUIET,
+            DiagnosticStatus.WARN,
+            "no focal estimate yet: no frames",
+        ),
+        (
+            {"publishable": False, "window": WindowEstimate(600.0, std_rel=0.2)},
+            QUIET,
+            DiagnosticStatus.WARN,
+            "held back: std_rel 0.2000 above max_uncertainty 0.05",
+        ),
+        (
+            {},
+            Rates(5.0, 150, 40, 110),
+            DiagnosticStatus.WARN,
+            "estimator behind: skipped 110 of 150 frames",
+        ),
+        (
+            {"busy_for": 1.0},
+            QUIET,
+            DiagnosticStatus.OK,
+            "focal 600.0 px",
+        ),  # busy, within max_estimate_age
+    ],
+)
+def test_diagnostics_levels(reading, rates, level, words):
+    got_level, message, _ = status_fields(_reading(**reading), rates)
+    assert got_level == level and words in message, message
+
+
+def test_rate_window_spans_back_to_the_newest_reading_at_least_five_seconds_old():
+    rw = RateWindow(5.0)
+    assert rw.add(0.0, 0, 0, 0).frame_hz == 0.0  # one reading: no span
+    rw.add(3.0, 90, 60, 30)
+    r = rw.add(6.0, 180, 120, 60)  # 0 s is the newest reading at least 5 s old
+    assert r.span == 6.0 and r.frame_hz == 30.0 and r.estimator_hz == 20.0 and r.skipped == 60
+    r = rw.add(9.0, 360, 150, 60)  # now 3 s is: the reading at 0 s is forgotten
+    assert r.span == 6.0 and r.matched == 270 and r.processed == 90 and r.skipped == 30
+
+
+# ----- the DDS environment
+
+
+def test_keep_on_this_machine_sets_only_what_is_unset():
+    from fcop_ros.ros.dds import keep_on_this_machine, profile_env_vars, use_large_image_profile
+
+    env = keep_on_this_machine({"ROS_DOMAIN_ID": "7"}, domain_id=99)
+    assert env["ROS_DOMAIN_ID"] == "7" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    assert keep_on_this_machine({}, domain_id=99)["ROS_DOMAIN_ID"] == "99"
+    env = use_large_image_profile({})
+    assert set(env) == set(profile_env_vars()) and all(v.endswith(".xml") for v in env.values())
+
+
+# ----- the calibration file
+
+
+def test_calibration_file_round_trips_through_yaml(tmp_path):
+    import yaml
+
+    from fcop_ros.ros.calibration import write_calibration
+    from msg_adapters import camera_info
+
+    info = camera_info(612.5, 319.5, 239.5, 640, 480)
+    path = tmp_path / "deep" / "cam.yaml"
+    write_calibration(str(path), info, "front")
+    doc = yaml.safe_load(path.read_text())
+    assert doc["camera_name"] == "front" and (doc["image_width"], doc["image_height"]) == (
+        640,
+        480,
+    )
+    assert doc["camera_matrix"]["data"] == [612.5, 0.0, 319.5, 0.0, 612.5, 239.5, 0.0, 0.0, 1.0]
+    assert doc["distortion_model"] == "plumb_bob" and len(doc["projection_matrix"]["data"]) == 12
+    assert [p.name for p in path.parent.iterdir()] == ["cam.yaml"]  # no temporary file left
