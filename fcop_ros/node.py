@@ -39,7 +39,7 @@ from visualization_msgs.msg import MarkerArray
 from msg_adapters import (ImageFormatError, camera_info, depth_from_image, marker_array, mask_from_image,
                           nocs_from_image, object_poses, pose_array, stamp_ns)
 
-from .core import FocalWindow, estimate_focal
+from .core import FocalWindow, estimate_focal, estimate_poses
 from .core.camera import image_centre
 from .sync import StampSynchronizer
 
@@ -620,7 +620,8 @@ class FcopNode(Node):
         objects = []
         if p["publish_poses"] or p["publish_markers"]:
             # Poses at the window's focal length: steadier than the frame's own.
-            objects = est.poses_at(ready.focal) if est.focal is not None else []
+            objects = (estimate_poses(est.instances, ready.focal, exclude=est.mirrored)
+                       if est.focal is not None else [])
             poses = object_poses(objects)  # one quaternion conversion for both messages
             if p["publish_poses"]:
                 self.pub_poses.publish(pose_array(objects, depth_msg.header, poses))
