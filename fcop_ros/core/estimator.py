@@ -21,7 +21,7 @@ from .correspondences import Instance, check_images, extract_instances
 from .object_fit import fit_objects
 from .pose import ObjectPose, umeyama
 from .solver import sample_triplets, solve_triplets
-from .stabbing import focal_intervals, interval_stabbing
+from .stabbing import focal_intervals, interval_stabbing, stab_equal_width
 
 DEFAULTS = dict(
     triplets_per_object=1500,   # random triplets drawn on each object
@@ -249,7 +249,10 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     if votes.size == 0:
         return FocalEstimate(None, votes_per_object=per_obj, reason="no valid triplet (degenerate geometry)", **base)
     lo, hi, back = focal_intervals(votes, opt["noise_bound"], opt["bound_mode"])
-    st = interval_stabbing(lo, hi)
+    if opt["bound_mode"] == "relative":  # one width in log f: one sort of the centres
+        st = stab_equal_width(np.log(votes), np.log1p(opt["noise_bound"]))
+    else:
+        st = interval_stabbing(lo, hi)
     inl = st.inliers
     count = int(inl.sum())
     ratio = count / votes.size
