@@ -184,23 +184,24 @@ def _local_means(w: np.ndarray, radius: int, *imgs):
     k = (2 * radius + 1, 2 * radius + 1)
     wf = w.astype(np.float32)
     planes = [wf]
-    for im in imgs:
-        if im.ndim == 2:
-            planes.append((im * wf).astype(np.float32))
-        else:
-            planes.extend((im[..., c] * wf).astype(np.float32) for c in range(im.shape[2]))
+    for im in imgs:  # products formed in float64 and rounded to float32 on output
+        for c in range(1 if im.ndim == 2 else im.shape[2]):
+            planes.append(np.multiply(im if im.ndim == 2 else im[..., c], wf,
+                                      out=np.empty(wf.shape, np.float32)))
     sums = cv2.split(cv2.boxFilter(cv2.merge(planes), -1, k, normalize=False,
                                    borderType=cv2.BORDER_CONSTANT))
     cnt = np.maximum(sums[0], 1e-6)
     out, c = [], 1
-    for im in imgs:
+    for im in imgs:  # float32 quotients, widened to float64 on output
         if im.ndim == 2:
-            out.append((sums[c] / cnt).astype(np.float64))
+            out.append(np.divide(sums[c], cnt, out=np.empty(cnt.shape)))
             c += 1
         else:
-            n = im.shape[2]
-            out.append((cv2.merge(sums[c:c + n]) / cnt[..., None]).astype(np.float64))
-            c += n
+            mean = np.empty(im.shape)
+            for j in range(im.shape[2]):
+                np.divide(sums[c + j], cnt, out=mean[..., j])
+            out.append(mean)
+            c += im.shape[2]
     return (*out, sums[0].astype(np.float64))
 
 
