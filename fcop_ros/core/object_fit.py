@@ -130,7 +130,7 @@ def _skew_batch(q):
 
 def _rodrigues(w):
     """Rotation matrices exp([w]x) for w (O,3)."""
-    th = np.linalg.norm(w, axis=-1)
+    th = np.sqrt(np.add.reduce(w * w, axis=-1))  # np.linalg.norm's own arithmetic
     k = w / np.where(th > 0, th, 1.0)[:, None]
     K = _skew_batch(k)
     s, c = np.sin(th)[:, None, None], np.cos(th)[:, None, None]
@@ -178,6 +178,7 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
     # The Jacobian of the predictions (u, v, d) in the parameters [log f], log s, w (3), t (3),
     # [tilt (2)]; its entries that are always zero are set once.
     J = np.zeros((o, m, 3, npar))
+    r = np.empty((o, m, 3))  # residuals of u, v, d
     for it in range(iterations):
         f = np.exp(logf)
         q = np.exp(logs)[:, None, None] * (P @ np.swapaxes(Rm, 1, 2))
@@ -186,13 +187,16 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
         uh = f[:, None] * Xc[..., 0] / z
         vh = f[:, None] * Xc[..., 1] / z
         gain = 1.0 + (U[..., 0] * tilt[:, 0, None] + U[..., 1] * tilt[:, 1, None])
-        r = np.stack([X[..., 0] - uh, X[..., 1] - vh, D - Xc[..., 2] * gain], -1)  # (O,M,3)
+        np.subtract(X[..., 0], uh, out=r[..., 0])
+        np.subtract(X[..., 1], vh, out=r[..., 1])
+        np.subtract(D, Xc[..., 2] * gain, out=r[..., 2])
+        r_px = r[..., 0] ** 2 + r[..., 1] ** 2
+        r_d = r[..., 2] ** 2
         # Noise levels from the robustly weighted residuals (with floors: exact data stay finite).
         wsum = np.maximum((w_rob * Vf).sum(1), 1e-300)
-        sig_px = np.sqrt(np.maximum(((r[..., 0] ** 2 + r[..., 1] ** 2) * w_rob).sum(1) / (2 * wsum),
-                                    (1e-6) ** 2))
-        sig_d = np.sqrt(np.maximum((r[..., 2] ** 2 * w_rob).sum(1) / wsum, (1e-7 * t[:, 2]) ** 2))
-        e = np.sqrt((r[..., 0] ** 2 + r[..., 1] ** 2) / sig_px[:, None] ** 2 / 2 + r[..., 2] ** 2 / sig_d[:, None] ** 2)
+        sig_px = np.sqrt(np.maximum((r_px * w_rob).sum(1) / (2 * wsum), (1e-6) ** 2))
+        sig_d = np.sqrt(np.maximum((r_d * w_rob).sum(1) / wsum, (1e-7 * t[:, 2]) ** 2))
+        e = np.sqrt(r_px / sig_px[:, None] ** 2 / 2 + r_d / sig_d[:, None] ** 2)
         w_rob = Vf / (1.0 + (e / _CAUCHY) ** 2)
         if it == iterations - 1:
             break
