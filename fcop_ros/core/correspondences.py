@@ -256,8 +256,8 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         # cost but little accuracy.
         st = max(1, int(np.ceil(np.sqrt(npix / (2.0 * max_pixels)))))
         inst = inst[::st, ::st]
-        dc = depth[r0:r1:st, c0:c1:st].astype(np.float64)
-        pc = nocs[r0:r1:st, c0:c1:st].astype(np.float64)
+        dc = depth[r0:r1:st, c0:c1:st].astype(np.float64, copy=False)
+        pc = nocs[r0:r1:st, c0:c1:st].astype(np.float64, copy=False)
         # Channel by channel: numpy reductions over a length-3 last axis are slow.
         with np.errstate(invalid="ignore"):
             ok = inst & (dc > 0) & (dc < np.inf)
@@ -333,7 +333,8 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
             x = np.column_stack([cc * st + c0 - cx, rr * st + r0 - cy]).astype(np.float64)
         else:
             x = np.column_stack([x_img[0][rr, cc], x_img[1][rr, cc]])
-        out.append(Instance(int(iid), x, dz[rr, cc].astype(np.float64), pz[rr, cc].astype(np.float64),
-                            var_d_img[rr, cc].astype(np.float64), sigma_d, sigma_p, int(npix),
-                            int(valid)))
+        out.append(Instance(int(iid), x, dz[rr, cc].astype(np.float64, copy=False),
+                            pz[rr, cc].astype(np.float64, copy=False),
+                            var_d_img[rr, cc].astype(np.float64, copy=False), sigma_d, sigma_p,
+                            int(npix), int(valid)))
     return out
