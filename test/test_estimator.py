@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fcop_ros import FocalEstimate, estimate_focal
+from fcop_ros import FocalEstimate, estimate_focal, estimate_poses
 from fcop_ros.core.pose import rotation_angle_deg
 from fcop_ros.synthetic.scenes import BAD_CASES, clean_frame, corrupted, noisy_frame
 
@@ -25,6 +25,28 @@ def test_clean_frames_exact_focal_and_poses(seed):
         assert np.abs(got.rotation - true.rotation).max() < 1e-3
         assert np.linalg.norm(got.translation - true.translation) < 1e-3
         assert abs(got.scale / true.scale - 1) < 1e-3
+
+
+def test_pose_stage_is_a_function_of_the_instances_and_a_focal():
+    """estimate_poses after the frame estimate (poses=False) at the frame's focal length gives
+    the poses estimate_focal attaches itself; a longer focal length draws them to the axis."""
+    fr = noisy_frame(2, "moderate")
+    with_poses = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0, poses=False)
+    assert est.objects == [] and est.instances and est.focal == with_poses.focal
+    got = estimate_poses(est.instances, est.focal, exclude=est.mirrored)
+    assert [o.instance_id for o in got] == [o.instance_id for o in with_poses.objects]
+    for a, b in zip(got, with_poses.objects):  # the same up to the fits' random pixel subsets
+        assert a.scale == pytest.approx(b.scale, rel=0.01)
+        assert np.linalg.norm(a.translation - b.translation) < 0.01 * np.linalg.norm(b.translation)
+    longer = estimate_poses(est.instances, 1.1 * est.focal)
+    for a, b in zip(got, longer):  # depth stays, the lateral offset shrinks as 1 / f
+        lateral = np.linalg.norm(a.translation[:2]) / 1.1
+        assert np.linalg.norm(b.translation[:2]) == pytest.approx(lateral, rel=0.02)
+    skip = got[0].instance_id
+    kept = estimate_poses(est.instances, est.focal, exclude=[skip])
+    assert skip not in [o.instance_id for o in kept]
+    assert estimate_poses([], 600.0) == []
 
 
 def test_global_depth_scale_leaves_focal_unchanged():

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from fcop_ros import interval_stabbing
-from fcop_ros.core.stabbing import focal_intervals
+from fcop_ros.core.stabbing import focal_intervals, stab_equal_width
 
 
 def brute_force(lo, hi, w):
@@ -75,3 +75,29 @@ def test_relative_bound_is_scale_free_and_absolute_is_pixels():
         focal_intervals(votes, 0.0, "relative")
     with pytest.raises(ValueError):
         focal_intervals(votes, 1.0, "bogus")
+
+
+@pytest.mark.parametrize("kind", ["clustered", "ties", "uniform", "two_clusters", "non_finite"])
+def test_equal_width_and_pruned_search_match_the_plain_algorithm(kind):
+    """stab_equal_width (one sort of the centres) and the block-pruned search give exactly
+    the result of the plain algorithm: one sort per end and a binary search for every start."""
+    rng = np.random.default_rng(len(kind))
+    for n in (1, 7, 3000, 60_000):
+        c = {"clustered": lambda: rng.normal(6.4, 0.2, n),
+             "ties": lambda: np.round(rng.normal(6.4, 0.2, n), 2),
+             "uniform": lambda: rng.uniform(-3.0, 3.0, n),
+             "two_clusters": lambda: np.concatenate([rng.normal(0, 1, n // 2),
+                                                     rng.normal(1, 0.01, n - n // 2)]),
+             "non_finite": lambda: np.where(rng.random(n) < 0.1, np.nan, rng.normal(0, 1, n)),
+             }[kind]()
+        for r in (0.0, 0.0488):
+            lo, hi = c - r, c + r
+            use = np.isfinite(lo) & np.isfinite(hi)
+            lo_s, hi_s = np.sort(lo[use]), np.sort(hi[use])
+            best = int(np.argmax(np.arange(1, lo_s.size + 1) - np.searchsorted(hi_s, lo_s)))
+            start = lo_s[best]
+            point = 0.5 * (start + hi_s[np.searchsorted(hi_s, start)])
+            inliers = (lo <= point) & (point <= hi)
+            for got in (interval_stabbing(lo, hi), stab_equal_width(c, r)):
+                assert got.point == point and got.region[0] == start
+                assert np.array_equal(got.inliers, inliers) and got.count == inliers.sum()

@@ -119,6 +119,24 @@ def _bounding_boxes(labels: np.ndarray, ids: np.ndarray):
     return boxes
 
 
+_FEW_IDS = 16  # masks whose largest id is at most this take the per-id path
+
+
+def _few_ids_and_boxes(mask: np.ndarray, top_id: int, min_pixels: int):
+    """instance_ids and _bounding_boxes for a mask whose ids are at most ``top_id``: one
+    comparison per possible id, counted and boxed."""
+    ids, counts, boxes = [], [], []
+    for iid in range(1, top_id + 1):
+        eq = mask == iid
+        n = np.count_nonzero(eq)
+        if n >= max(min_pixels, 1):
+            c, r, bw, bh = cv2.boundingRect(eq.view(np.uint8))
+            ids.append(iid)
+            counts.append(n)
+            boxes.append((r, r + bh, c, c + bw))
+    return np.array(ids, dtype=np.int64), np.array(counts, dtype=np.int64), boxes
+
+
 def _second_diff_sigma(img: np.ndarray, ok: np.ndarray) -> float:
     """Robust per-pixel noise sigma from horizontal and vertical second differences."""
     vals = []
@@ -159,19 +177,32 @@ def _gradient(img: np.ndarray, ok: np.ndarray) -> np.ndarray:
     return g
 
 
-def _local_mean(img: np.ndarray, w: np.ndarray, radius: int):
-    """Mean of ``img`` over the pixels with w=1 in a (2r+1)^2 box; also the count."""
+def _local_means(w: np.ndarray, radius: int, *imgs):
+    """Mean of each of ``imgs`` (2-D or 3-D) over the pixels with w=1 in a (2r+1)^2 box, and
+    the count: (mean, ..., count). One box filter of all channels stacked (OpenCV filters every
+    channel alike, so each gets the values of a filter of its own)."""
     k = (2 * radius + 1, 2 * radius + 1)
     wf = w.astype(np.float32)
-    cnt = cv2.boxFilter(wf, -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
-    if img.ndim == 2:
-        num = cv2.boxFilter((img * wf).astype(np.float32), -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
-        mean = num / np.maximum(cnt, 1e-6)
-    else:
-        num = cv2.boxFilter((img * wf[..., None]).astype(np.float32), -1, k, normalize=False,
-                            borderType=cv2.BORDER_CONSTANT)
-        mean = num / np.maximum(cnt, 1e-6)[..., None]
-    return mean.astype(np.float64), cnt.astype(np.float64)
+    planes = [wf]
+    for im in imgs:  # products formed in float64 and rounded to float32 on output
+        for c in range(1 if im.ndim == 2 else im.shape[2]):
+            planes.append(np.multiply(im if im.ndim == 2 else im[..., c], wf,
+                                      out=np.empty(wf.shape, np.float32)))
+    sums = cv2.split(cv2.boxFilter(cv2.merge(planes), -1, k, normalize=False,
+                                   borderType=cv2.BORDER_CONSTANT))
+    cnt = np.maximum(sums[0], 1e-6)
+    out, c = [], 1
+    for im in imgs:  # float32 quotients, widened to float64 on output
+        if im.ndim == 2:
+            out.append(np.divide(sums[c], cnt, out=np.empty(cnt.shape)))
+            c += 1
+        else:
+            mean = np.empty(im.shape)
+            for j in range(im.shape[2]):
+                np.divide(sums[c + j], cnt, out=mean[..., j])
+            out.append(mean)
+            c += im.shape[2]
+    return (*out, sums[0].astype(np.float64))
 
 
 def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pixels: int = 50,
@@ -193,9 +224,17 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
     else:
         cx, cy = (float(v) for v in principal_point)
     rng = np.random.default_rng() if rng is None else rng
-    # Negative ids are background; the clipped ids viewed as unsigned need no second clip below.
-    labels = mask if mask.dtype.kind == "u" else np.maximum(mask, 0).view(np.dtype(f"u{mask.dtype.itemsize}"))
-    ids, counts = instance_ids(labels, min_object_pixels)
+    top_id = int(mask.max()) if mask.size else 0
+    if top_id <= _FEW_IDS:
+        # Few possible ids: one comparison per id gives its count and box (OpenCV), about 3x
+        # faster than a histogram of the whole image plus a box pass.
+        ids, counts, boxes = _few_ids_and_boxes(mask, top_id, min_object_pixels)
+    else:
+        # Negative ids are background; the clipped ids viewed as unsigned need no second clip.
+        labels = mask if mask.dtype.kind == "u" else np.maximum(mask, 0).view(
+            np.dtype(f"u{mask.dtype.itemsize}"))
+        ids, counts = instance_ids(labels, min_object_pixels)
+        boxes = None
     out = InstanceList()
     if ids.size == 0:
         return out
@@ -203,7 +242,9 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         top = np.sort(np.argsort(-counts, kind="stable")[:max_instances])
         out.skipped = int(ids.size - top.size)
         ids, counts = ids[top], counts[top]
-    boxes = _bounding_boxes(labels, ids)
+        boxes = None if boxes is None else [boxes[k] for k in top]
+    if boxes is None:
+        boxes = _bounding_boxes(labels, ids)
     for iid, npix, (r0, r1, c0, c1) in zip(ids, counts, boxes):
         pad = denoise_radius + erode_px + 1
         r0, r1, c0, c1 = max(r0 - pad, 0), min(r1 + pad, h), max(c0 - pad, 0), min(c1 + pad, w)
@@ -215,8 +256,8 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         # cost but little accuracy.
         st = max(1, int(np.ceil(np.sqrt(npix / (2.0 * max_pixels)))))
         inst = inst[::st, ::st]
-        dc = depth[r0:r1:st, c0:c1:st].astype(np.float64)
-        pc = nocs[r0:r1:st, c0:c1:st].astype(np.float64)
+        dc = depth[r0:r1:st, c0:c1:st].astype(np.float64, copy=False)
+        pc = nocs[r0:r1:st, c0:c1:st].astype(np.float64, copy=False)
         # Channel by channel: numpy reductions over a length-3 last axis are slow.
         with np.errstate(invalid="ignore"):
             ok = inst & (dc > 0) & (dc < np.inf)
@@ -244,8 +285,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         x_img = None
         if denoise_radius > 0 or outlier_sigma > 0:
             rad = max(int(round(denoise_radius / st)), 1)  # the same window in image pixels
-            md, cnt = _local_mean(dz, ok, rad)
-            mp, _ = _local_mean(pz, ok, rad)
+            md, mp, cnt = _local_means(ok, rad, dz, pz)
             if outlier_sigma > 0:
                 rd = np.abs(dz - md)
                 dp = pz - mp
@@ -255,8 +295,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                 ok2 = ok & (rd <= thr_d) & (rp <= thr_p)
                 if ok2.sum() >= max(min_object_pixels, 3) and not np.array_equal(ok2, ok):
                     ok = ok2
-                    md, cnt = _local_mean(dz, ok, rad)
-                    mp, _ = _local_mean(pz, ok, rad)
+                    md, mp, cnt = _local_means(ok, rad, dz, pz)
             means_of = ok  # the pixels md, mp and cnt are means over
             if edge_sigma > 0:
                 # Depth bleeding across object boundaries makes steep ramps: drop pixels whose
@@ -276,10 +315,9 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                 uu = (np.arange(c0, c1, st)[: dz.shape[1]] - cx)[None, :]
                 vv = (np.arange(r0, r1, st)[: dz.shape[0]] - cy)[:, None]
                 if ok is not means_of:
-                    md, cnt = _local_mean(dz, ok, rad)
-                    mp, _ = _local_mean(pz, ok, rad)
-                mu, _ = _local_mean(dz * uu, ok, rad)
-                mv, _ = _local_mean(dz * vv, ok, rad)
+                    md, mp, mu, mv, cnt = _local_means(ok, rad, dz, pz, dz * uu, dz * vv)
+                else:
+                    mu, mv, _ = _local_means(ok, rad, dz * uu, dz * vv)
                 with np.errstate(divide="ignore", invalid="ignore"):
                     x_img = (mu / md, mv / md)
                 dz, pz = md, mp
@@ -295,7 +333,8 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
             x = np.column_stack([cc * st + c0 - cx, rr * st + r0 - cy]).astype(np.float64)
         else:
             x = np.column_stack([x_img[0][rr, cc], x_img[1][rr, cc]])
-        out.append(Instance(int(iid), x, dz[rr, cc].astype(np.float64), pz[rr, cc].astype(np.float64),
-                            var_d_img[rr, cc].astype(np.float64), sigma_d, sigma_p, int(npix),
-                            int(valid)))
+        out.append(Instance(int(iid), x, dz[rr, cc].astype(np.float64, copy=False),
+                            pz[rr, cc].astype(np.float64, copy=False),
+                            var_d_img[rr, cc].astype(np.float64, copy=False), sigma_d, sigma_p,
+                            int(npix), int(valid)))
     return out

@@ -21,7 +21,7 @@ from .correspondences import Instance, check_images, extract_instances
 from .object_fit import fit_objects
 from .pose import ObjectPose, umeyama
 from .solver import sample_triplets, solve_triplets
-from .stabbing import focal_intervals, interval_stabbing
+from .stabbing import focal_intervals, interval_stabbing, stab_equal_width
 
 DEFAULTS = dict(
     triplets_per_object=1500,   # random triplets drawn on each object
@@ -48,7 +48,7 @@ DEFAULTS = dict(
     fit_iterations=10,          # its Gauss-Newton iterations
     depth_tilt=True,            # fit each object's local depth-error gradient as a nuisance
     pose_max_std=0.25,          # no pose for an object whose own focal std_rel is above this
-    poses=True,                 # False: leave poses to FocalEstimate.poses_at (e.g. at a window's focal)
+    poses=True,                 # False: leave poses to estimate_poses (e.g. at a window's focal)
     method="stabbing",          # or "ransac"
     ransac_hypotheses=400,
     ransac_threshold=0.005,     # metres
@@ -78,7 +78,10 @@ class FocalEstimate:
     {instance_id: why} of instances not used; mirrored: instance ids whose NOCS fit only as a
     reflection (channel order or axis convention); instances_skipped: instances beyond
     ``max_instances`` (the smallest), not used; objects: poses of the combined, unmirrored
-    objects (see :mod:`fcop_ros.core.pose`); votes: all valid triplet votes (px).
+    objects (see :mod:`fcop_ros.core.pose`); votes: all valid triplet votes (px);
+    instances: the :class:`~.correspondences.Instance` s of the objects that made the estimate,
+    the input of the pose stage: ``estimate_poses(est.instances, focal, exclude=est.mirrored)``
+    at any focal length, e.g. a window's.
     """
 
     focal: float | None
@@ -103,10 +106,11 @@ class FocalEstimate:
     instances: list = field(default_factory=list, repr=False)
 
     def poses_at(self, focal: float) -> list[ObjectPose]:
-        """Poses of this frame's combined, unmirrored objects at a focal length (e.g. a window's)."""
+        """``estimate_poses(self.instances, focal, exclude=self.mirrored)``, or ``objects`` when
+        they were made at this focal length."""
         if self.objects and self.focal is not None and focal == self.focal:
             return list(self.objects)
-        return _poses(self.instances, float(focal))
+        return estimate_poses(self.instances, focal, exclude=self.mirrored)
 
 
 def _options(options: dict) -> dict:
@@ -138,16 +142,25 @@ def _votes(instances: list[Instance], opt: dict, rng: np.random.Generator):
     return f[ok], owner[ok]
 
 
-def _poses(instances, focal: float, rng: np.random.Generator | None = None) -> list[ObjectPose]:
-    """Pose of each instance at ``focal``: the maximum-likelihood similarity (reprojection and
-    depth residuals), skipping instances whose NOCS fit only as a reflection."""
+def estimate_poses(instances, focal: float, *, exclude=(),
+                   rng: np.random.Generator | None = None) -> list[ObjectPose]:
+    """The pose stage: the pose of each instance at ``focal`` (e.g. a window's focal length).
+
+    instances: items with instance_id, x, d, p (a :class:`FocalEstimate`'s ``instances``: the
+    objects that made its estimate); exclude: instance ids to leave out (its ``mirrored``).
+    Each pose is the maximum-likelihood similarity (reprojection and depth residuals) at the
+    fixed focal length, all instances fitted in one batch; instances whose NOCS fit only as a
+    reflection get none. ``rng`` draws the fit's pixel subsets (default: a fixed seed).
+    """
     if not instances:
         return []
-    fits = fit_objects(instances, focal, fix_focal=True, proper=True, iterations=6, rng=rng)
+    fits = fit_objects(instances, float(focal), fix_focal=True, proper=True, iterations=6, rng=rng)
+    skip = set(exclude)
     return [ObjectPose(inst.instance_id, fits.rotation[k], fits.translation[k], float(fits.scale[k]),
                        float(fits.inlier_ratio[k]), float(fits.sigma_depth[k]), int(len(inst.d)))
             for k, inst in enumerate(instances)
-            if fits.ok[k] and not fits.mirrored[k] and np.linalg.det(fits.rotation[k]) > 0]
+            if fits.ok[k] and not fits.mirrored[k] and np.linalg.det(fits.rotation[k]) > 0
+            and inst.instance_id not in skip]
 
 
 def _ransac(instances, opt, rng):
@@ -239,7 +252,10 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     if votes.size == 0:
         return FocalEstimate(None, votes_per_object=per_obj, reason="no valid triplet (degenerate geometry)", **base)
     lo, hi, back = focal_intervals(votes, opt["noise_bound"], opt["bound_mode"])
-    st = interval_stabbing(lo, hi)
+    if opt["bound_mode"] == "relative":  # one width in log f: one sort of the centres
+        st = stab_equal_width(np.log(votes), np.log1p(opt["noise_bound"]))
+    else:
+        st = interval_stabbing(lo, hi)
     inl = st.inliers
     count = int(inl.sum())
     ratio = count / votes.size
@@ -314,6 +330,5 @@ def _finish(est: FocalEstimate, focal: float, std_rel, instances, opt: dict, rng
         return est
     est.focal, est.std_rel, est.instances = focal, std_rel, list(instances)
     if opt["poses"]:
-        mirrored = set(est.mirrored)
-        est.objects = [p for p in _poses(est.instances, focal, rng) if p.instance_id not in mirrored]
+        est.objects = estimate_poses(est.instances, focal, exclude=est.mirrored, rng=rng)
     return est

@@ -109,17 +109,28 @@ def _orthogonal_fit(P, Y, W, proper: bool):
     return s, Q, t, np.clip(quality, 0.0, 1.0), mirrored
 
 
+def _row_median(res, valid):
+    """Median of each row's valid, non-NaN entries (np.nanmedian's value); 0 for an empty row."""
+    use = valid & ~np.isnan(res)
+    n = use.sum(1)
+    srt = np.sort(np.where(use, res, np.inf), axis=1)
+    rows = np.arange(res.shape[0])
+    med = (srt[rows, np.maximum((n - 1) // 2, 0)] + srt[rows, n // 2]) / 2
+    return np.where(n > 0, med, 0.0)
+
+
 def _skew_batch(q):
     """[q]x for q (..., 3) -> (..., 3, 3)."""
-    z = np.zeros(q.shape[:-1])
-    return np.stack([np.stack([z, -q[..., 2], q[..., 1]], -1),
-                     np.stack([q[..., 2], z, -q[..., 0]], -1),
-                     np.stack([-q[..., 1], q[..., 0], z], -1)], -2)
+    out = np.zeros(q.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -q[..., 2], q[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = q[..., 2], -q[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -q[..., 1], q[..., 0]
+    return out
 
 
 def _rodrigues(w):
     """Rotation matrices exp([w]x) for w (O,3)."""
-    th = np.linalg.norm(w, axis=-1)
+    th = np.sqrt(np.add.reduce(w * w, axis=-1))  # np.linalg.norm's own arithmetic
     k = w / np.where(th > 0, th, 1.0)[:, None]
     K = _skew_batch(k)
     s, c = np.sin(th)[:, None, None], np.cos(th)[:, None, None]
@@ -149,8 +160,7 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
         s, Q, t, quality, mirrored = _orthogonal_fit(P, Y, W, proper)
         diff = Y - (s[:, None, None] * (P @ np.swapaxes(Q, 1, 2)) + t[:, None])
         res = np.sqrt((diff * diff).sum(-1))
-        med = np.nanmedian(np.where(V, res, np.nan), axis=1)
-        med = np.where(np.isfinite(med), med, 0.0)
+        med = _row_median(res, V)
         W = Vf / (1.0 + (res / np.maximum(_CAUCHY * MAD_TO_SIGMA * med, 1e-12)[:, None]) ** 2)
     logs = np.log(np.maximum(s, 1e-12))
     Rm = Q
@@ -165,6 +175,10 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
     w_rob = W
     lam = 1e-6
     H = np.zeros((o, npar, npar))
+    # The Jacobian of the predictions (u, v, d) in the parameters [log f], log s, w (3), t (3),
+    # [tilt (2)]; its entries that are always zero are set once.
+    J = np.zeros((o, m, 3, npar))
+    r = np.empty((o, m, 3))  # residuals of u, v, d
     for it in range(iterations):
         f = np.exp(logf)
         q = np.exp(logs)[:, None, None] * (P @ np.swapaxes(Rm, 1, 2))
@@ -172,37 +186,47 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
         z = np.where(np.abs(Xc[..., 2]) > 1e-9, Xc[..., 2], 1e-9)
         uh = f[:, None] * Xc[..., 0] / z
         vh = f[:, None] * Xc[..., 1] / z
-        gain = 1.0 + (U * tilt[:, None]).sum(-1)
-        r = np.stack([X[..., 0] - uh, X[..., 1] - vh, D - Xc[..., 2] * gain], -1)  # (O,M,3)
+        gain = 1.0 + (U[..., 0] * tilt[:, 0, None] + U[..., 1] * tilt[:, 1, None])
+        np.subtract(X[..., 0], uh, out=r[..., 0])
+        np.subtract(X[..., 1], vh, out=r[..., 1])
+        np.subtract(D, Xc[..., 2] * gain, out=r[..., 2])
+        r_px = r[..., 0] ** 2 + r[..., 1] ** 2
+        r_d = r[..., 2] ** 2
         # Noise levels from the robustly weighted residuals (with floors: exact data stay finite).
         wsum = np.maximum((w_rob * Vf).sum(1), 1e-300)
-        sig_px = np.sqrt(np.maximum(((r[..., 0] ** 2 + r[..., 1] ** 2) * w_rob).sum(1) / (2 * wsum),
-                                    (1e-6) ** 2))
-        sig_d = np.sqrt(np.maximum((r[..., 2] ** 2 * w_rob).sum(1) / wsum, (1e-7 * t[:, 2]) ** 2))
-        e = np.sqrt((r[..., 0] ** 2 + r[..., 1] ** 2) / sig_px[:, None] ** 2 / 2 + r[..., 2] ** 2 / sig_d[:, None] ** 2)
+        sig_px = np.sqrt(np.maximum((r_px * w_rob).sum(1) / (2 * wsum), (1e-6) ** 2))
+        sig_d = np.sqrt(np.maximum((r_d * w_rob).sum(1) / wsum, (1e-7 * t[:, 2]) ** 2))
+        e = np.sqrt(r_px / sig_px[:, None] ** 2 / 2 + r_d / sig_d[:, None] ** 2)
         w_rob = Vf / (1.0 + (e / _CAUCHY) ** 2)
         if it == iterations - 1:
             break
-        # d(prediction)/dX rows for u, v, d; dX/d(log s, w, t) = [q, -[q]x, I].
-        # Jacobian of the predictions (u, v, d) in the parameters [log f], log s, w (3), t (3),
-        # [tilt (2)], written out per column (small batched matrix products are slow in numpy).
-        # dX/d(log s) = q, dX/dw = -[q]x, dX/dt = I.
+        # d(prediction)/dX rows for u, v, d times dX/d(log s, w, t) = [q, -[q]x, I], written
+        # out per entry (small batched matrix products are slow in numpy), with uz = u/z,
+        # vz = v/z and the zero and unit entries of [q, -[q]x, I] multiplied out.
         qx, qy, qz = q[..., 0], q[..., 1], q[..., 2]
-        zero, one = np.zeros_like(qx), np.ones_like(qx)
-        dxx = (qx, zero, qz, -qy, one, zero, zero)
-        dxy = (qy, -qz, zero, qx, zero, one, zero)
-        dxz = (qz, qy, -qx, zero, zero, zero, one)
         a = f[:, None] / z
-        J = np.empty((o, m, 3, npar))
+        uz, vz = uh / z, vh / z
         k0 = 0 if fix_focal else 1
         if not fix_focal:
-            J[..., 0, 0], J[..., 1, 0], J[..., 2, 0] = uh, vh, 0.0
-        for k in range(7):
-            J[..., 0, k0 + k] = a * dxx[k] - uh / z * dxz[k]
-            J[..., 1, k0 + k] = a * dxy[k] - vh / z * dxz[k]
-            J[..., 2, k0 + k] = gain * dxz[k]
+            J[..., 0, 0], J[..., 1, 0] = uh, vh
+        Ju, Jv, Jd = J[..., 0, k0:k0 + 7], J[..., 1, k0:k0 + 7], J[..., 2, k0:k0 + 7]
+        Ju[..., 0] = a * qx - uz * qz
+        Ju[..., 1] = -(uz * qy)
+        Ju[..., 2] = a * qz + uz * qx
+        Ju[..., 3] = -(a * qy)
+        Ju[..., 4] = a
+        Ju[..., 6] = -uz
+        Jv[..., 0] = a * qy - vz * qz
+        Jv[..., 1] = a * -qz - vz * qy
+        Jv[..., 2] = vz * qx
+        Jv[..., 3] = a * qx
+        Jv[..., 5] = a
+        Jv[..., 6] = -vz
+        Jd[..., 0] = gain * qz
+        Jd[..., 1] = gain * qy
+        Jd[..., 2] = -(gain * qx)
+        Jd[..., 6] = gain
         if depth_tilt:
-            J[..., :2, k0 + 7:] = 0.0
             J[..., 2, k0 + 7:] = z[..., None] * U
         wr = w_rob[..., None] / np.stack([sig_px, sig_px, sig_d], -1)[:, None, :] ** 2  # (O,M,3)
         Jr = J.reshape(o, 3 * m, npar)

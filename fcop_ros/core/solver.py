@@ -7,15 +7,17 @@ with K = diag(f, f, 1) gives, after differencing (removes t) and taking norms (r
     s^2 ||p_a - p_b||^2 - ||d_a x_a - d_b x_b||^2 / f^2 = (d_a - d_b)^2
 
 A triplet (i, j, k) gives three such rows for the pairs (i,j), (j,k), (i,k), linear in the
-unknowns (s^2, 1/f^2). Everything here is vectorised over triplets; no Python loop.
+unknowns (s^2, 1/f^2). Everything here is vectorised over triplets (a chunk at a time).
 """
 from __future__ import annotations
 
 import numpy as np
 
-# A triplet whose 2x2 normal matrix is closer to singular than this (relative to the product
-# of its column norms) does not determine (s^2, 1/f^2) and is reported invalid.
+# A triplet whose 2x2 normal matrix is closer to singular than this (its determinant relative
+# to the product of its diagonal, which is unit-free) does not determine (s^2, 1/f^2) and is
+# reported invalid.
 _DEGENERATE_REL_DET = 1e-10
+_CHUNK = 8192  # triplets solved together: 64 KiB per temporary, which stays in cache
 
 
 def solve_triplets(x: np.ndarray, d: np.ndarray, p: np.ndarray, triplets: np.ndarray):
@@ -42,46 +44,81 @@ def solve_triplets(x: np.ndarray, d: np.ndarray, p: np.ndarray, triplets: np.nda
     if tri.size and (tri.min() < 0 or tri.max() >= x.shape[0]):
         raise ValueError("solve_triplets: triplet index out of range")
 
-    # Gather each triplet's points once; every pair term is then written out per component on
-    # contiguous 1-D columns (reductions over a length-2/3 last axis are slow in numpy).
-    i, j, k = tri[:, 0], tri[:, 1], tri[:, 2]
-    ycols = (d * x[:, 0], d * x[:, 1])
-    P = [[p[idx, c] for c in range(3)] for idx in (i, j, k)]
-    Y = [[yc[idx] for yc in ycols] for idx in (i, j, k)]
-    Dd = [d[idx] for idx in (i, j, k)]
-    nocs_sq, image_sq, depth_sq = [], [], []
-    for a, b in ((0, 1), (1, 2), (0, 2)):
-        nocs_sq.append((P[a][0] - P[b][0]) ** 2 + (P[a][1] - P[b][1]) ** 2 + (P[a][2] - P[b][2]) ** 2)
-        image_sq.append((Y[a][0] - Y[b][0]) ** 2 + (Y[a][1] - Y[b][1]) ** 2)
-        depth_sq.append((Dd[a] - Dd[b]) ** 2)
-
-    # Least squares of  s2 * nocs_sq - w * image_sq = depth_sq  over the three rows, with the
-    # columns normalised so that the 2x2 normal equations stay well conditioned
-    # (image_sq is ~1e6 times larger than nocs_sq in typical units).
+    t = tri.shape[0]
+    focal, scale_sq, valid = np.empty(t), np.empty(t), np.empty(t, dtype=bool)
+    # Every pair term is written out per component on 1-D columns (reductions over a length-2/3
+    # last axis are slow in numpy), a chunk of triplets at a time so that the temporaries stay
+    # in cache; the columns are gathered straight from the (strided) input, which is not copied.
+    cols = (p[:, 0], p[:, 1], p[:, 2], x[:, 0], x[:, 1], d)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        na = np.sqrt(nocs_sq[0] ** 2 + nocs_sq[1] ** 2 + nocs_sq[2] ** 2)
-        nb = np.sqrt(image_sq[0] ** 2 + image_sq[1] ** 2 + image_sq[2] ** 2)
-        ok = (na > 0) & (nb > 0) & np.isfinite(na) & np.isfinite(nb)
-        na = np.where(ok, na, 1.0)
-        nb = np.where(ok, nb, 1.0)
-        A = [v / na for v in nocs_sq]
-        B = [v / nb for v in image_sq]
-        saa = A[0] * A[0] + A[1] * A[1] + A[2] * A[2]
-        sbb = B[0] * B[0] + B[1] * B[1] + B[2] * B[2]
-        sab = A[0] * B[0] + A[1] * B[1] + A[2] * B[2]
-        sac = A[0] * depth_sq[0] + A[1] * depth_sq[1] + A[2] * depth_sq[2]
-        sbc = B[0] * depth_sq[0] + B[1] * depth_sq[1] + B[2] * depth_sq[2]
-        det = saa * sbb - sab * sab
-        ok &= det > _DEGENERATE_REL_DET * saa * sbb
-        det = np.where(ok, det, 1.0)
-        s2 = (sbb * sac - sab * sbc) / det / na
-        w = (sab * sac - saa * sbc) / det / nb
-        ok &= np.isfinite(s2) & np.isfinite(w) & (s2 > 0) & (w > 0)
-        focal = np.where(ok, 1.0 / np.sqrt(np.where(ok, w, 1.0)), 0.0)
-        ok &= np.isfinite(focal)
-    focal = np.where(ok, focal, 0.0)
-    scale_sq = np.where(ok, s2, 0.0)
-    return focal, scale_sq, ok
+        for s in range(0, t, _CHUNK):
+            e = min(s + _CHUNK, t)
+            _solve_chunk(cols, tri[s:e].T, focal[s:e], scale_sq[s:e], valid[s:e])
+    return focal, scale_sq, valid
+
+
+def _square_distance(g, a, b, comps):
+    """Sum over the columns ``comps`` of (point a - point b)^2, in one new array."""
+    out = g[a][comps[0]] - g[b][comps[0]]
+    out *= out
+    for c in comps[1:]:
+        t = g[a][c] - g[b][c]
+        t *= t
+        out += t
+    return out
+
+
+def _dot3(u, v):
+    out = u[0] * v[0]
+    out += u[1] * v[1]
+    out += u[2] * v[2]
+    return out
+
+
+def _solve_chunk(cols, idx, focal, scale_sq, valid):
+    """Solve the triplets idx (3, T) into the views focal, scale_sq and valid (T,)."""
+    g = []
+    for i in idx:  # each triplet's k-th point: NOCS, camera-plane point d x, depth
+        px, py, pz, xx, xy, dd = (c[i] for c in cols)
+        xx *= dd
+        xy *= dd
+        g.append((px, py, pz, xx, xy, dd))
+    pairs = ((0, 1), (1, 2), (0, 2))
+    nocs_sq = [_square_distance(g, i, j, (0, 1, 2)) for i, j in pairs]  # ||p_i - p_j||^2
+    image_sq = [_square_distance(g, i, j, (3, 4)) for i, j in pairs]  # ||d_i x_i - d_j x_j||^2
+    depth_sq = [_square_distance(g, i, j, (5,)) for i, j in pairs]  # (d_i - d_j)^2
+    # Least squares of  s2 * nocs_sq - w * image_sq = depth_sq  over the three rows, with the
+    # columns normalised so that the 2x2 normal equations stay well conditioned (image_sq is
+    # ~1e6 times larger than nocs_sq in typical units). An empty or non-finite column gives
+    # NaN or a zero determinant below, so the tests at the end reject it.
+    na = np.sqrt(_dot3(nocs_sq, nocs_sq))
+    nb = np.sqrt(_dot3(image_sq, image_sq))
+    A = [np.divide(v, na, out=v) for v in nocs_sq]
+    B = [np.divide(v, nb, out=v) for v in image_sq]
+    saa, sbb, sab = _dot3(A, A), _dot3(B, B), _dot3(A, B)
+    sac, sbc = _dot3(A, depth_sq), _dot3(B, depth_sq)
+    det = saa * sbb
+    det -= sab * sab
+    ok = det > _DEGENERATE_REL_DET * saa * sbb
+    s2 = sbb * sac
+    s2 -= sab * sbc
+    s2 /= det
+    np.divide(s2, na, out=scale_sq)
+    w = sab * sac
+    w -= saa * sbc
+    w /= det
+    w /= nb
+    ok &= np.isfinite(scale_sq)
+    ok &= np.isfinite(w)
+    ok &= scale_sq > 0
+    ok &= w > 0
+    np.sqrt(w, out=w)
+    np.divide(1.0, w, out=focal)
+    ok &= np.isfinite(focal)
+    bad = ~ok
+    focal[bad] = 0.0
+    scale_sq[bad] = 0.0
+    valid[...] = ok
 
 
 def sample_triplets(n: int, count: int, rng: np.random.Generator) -> np.ndarray:

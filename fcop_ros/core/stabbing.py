@@ -57,13 +57,17 @@ def interval_stabbing(lo, hi, weights=None) -> StabbingResult:
     lo_u, hi_u = lo[use], hi[use]
     if weights is None:
         lo_s, hi_s = np.sort(lo_u), np.sort(hi_u)
-        depth = np.arange(1, lo_s.size + 1) - np.searchsorted(hi_s, lo_s, side="left")
-    else:
-        w_u = w[use]
-        order_lo, order_hi = np.argsort(lo_u), np.argsort(hi_u)
-        lo_s, hi_s = lo_u[order_lo], hi_u[order_hi]
-        cw_hi = np.concatenate([[0.0], np.cumsum(w_u[order_hi])])
-        depth = np.cumsum(w_u[order_lo]) - cw_hi[np.searchsorted(hi_s, lo_s, side="left")]
+        best, below = _deepest_start(lo_s, hi_s)
+        start, end = lo_s[best], hi_s[below]  # the first end at or after the start
+        point = 0.5 * (start + end)
+        inliers = (lo <= point) & (point <= hi) & np.isfinite(lo) & np.isfinite(hi)
+        return StabbingResult(float(point), float(np.count_nonzero(inliers & use)),
+                              (float(start), float(end)), inliers)
+    w_u = w[use]
+    order_lo, order_hi = np.argsort(lo_u), np.argsort(hi_u)
+    lo_s, hi_s = lo_u[order_lo], hi_u[order_hi]
+    cw_hi = np.concatenate([[0.0], np.cumsum(w_u[order_hi])])
+    depth = np.cumsum(w_u[order_lo]) - cw_hi[np.searchsorted(hi_s, lo_s, side="left")]
     best = int(np.argmax(depth))  # first maximum in sorted order: the leftmost region
     start = lo_s[best]
     end = hi_s[np.searchsorted(hi_s, start, side="left")]  # the first end at or after the start
@@ -71,6 +75,77 @@ def interval_stabbing(lo, hi, weights=None) -> StabbingResult:
     inliers = (lo <= point) & (point <= hi) & np.isfinite(lo) & np.isfinite(hi)
     count = float(w[inliers & use].sum())
     return StabbingResult(float(point), count, (float(start), float(end)), inliers)
+
+
+def stab_equal_width(centre, half_width: float) -> StabbingResult:
+    """``interval_stabbing(centre - half_width, centre + half_width)``, the same result, faster.
+
+    Intervals of one width (focal votes in relative mode are one width in log f) are ordered
+    alike by their starts, ends and centres, so one sort of the centres replaces the two sorts of
+    the ends; non-finite centres are ignored."""
+    c = np.asarray(centre, dtype=np.float64).ravel()
+    r = float(half_width)
+    if not (r >= 0 and np.isfinite(r)):
+        raise ValueError(f"stab_equal_width: half_width must be finite and >= 0, got {half_width}")
+    finite = np.isfinite(c)
+    c_s = np.sort(c if finite.all() else c[finite])
+    if c_s.size == 0:
+        return StabbingResult(None, 0.0, None, np.zeros(c.size, dtype=bool))
+    # Rounding is monotone, so these are exactly np.sort(c - r) and np.sort(c + r).
+    lo_s, hi_s = c_s - r, c_s + r
+    best, below = _deepest_start(lo_s, hi_s)
+    start, end = lo_s[best], hi_s[below]  # the first end at or after the start
+    point = 0.5 * (start + end)
+    # The intervals containing the point are a run of the sorted order (both ends monotone in
+    # the centre): the same as comparing every interval's ends with the point, without them.
+    first = int(np.searchsorted(hi_s, point, side="left"))
+    stop = int(np.searchsorted(lo_s, point, side="right"))
+    inliers = (c >= c_s[first]) & (c <= c_s[stop - 1])  # false for non-finite centres
+    return StabbingResult(float(point), float(stop - first), (float(start), float(end)), inliers)
+
+
+def _deepest_start(lo_s: np.ndarray, hi_s: np.ndarray, block: int = 256):
+    """The first i maximising the depth (i + 1) - k_i just after the start lo_s[i], where
+    k_i = #(hi_s < lo_s[i]); returns (i, k_i). lo_s and hi_s sorted, lo_s[i] <= hi_s[i].
+
+    k is exact at every ``block``-th start; within a block the depth is at most its end minus
+    k at its start. Only blocks whose bound reaches the best exact depth at a block start can
+    hold the maximum, and only they are searched in full: votes gather around the answer, so
+    a few percent of them (at 1e6 votes, a third of the cost of searching every start)."""
+    n = lo_s.size
+    if n > 8 * block:
+        starts = np.arange(0, n, block)
+        k_start = np.searchsorted(hi_s, lo_s[starts], side="left")
+        bound = np.minimum(starts + block, n) - k_start
+        cand = np.flatnonzero(bound >= np.max(starts + 1 - k_start))
+        if cand.size * block <= n // 4:
+            idx = (starts[cand, None] + np.arange(block)).ravel()
+            idx = idx[idx < n]
+            k = np.searchsorted(hi_s, lo_s[idx], side="left")
+            j = int(np.argmax(idx + 1 - k))  # idx ascends: the first maximum is the leftmost
+            return int(idx[j]), int(k[j])
+    k = _count_below(hi_s, lo_s)
+    best = int(np.argmax(np.arange(1, n + 1) - k))
+    return best, int(k[best])
+
+
+def _count_below(sorted_values, sorted_queries, block: int = 4096):
+    """``np.searchsorted(sorted_values, sorted_queries, side="left")`` for sorted queries.
+
+    Both sorted: each block of queries searches only the stretch of values between its first
+    query's answer and the next block's, which stays in cache (about 1.4x faster at 1e6)."""
+    n = sorted_queries.size
+    if n <= 2 * block:
+        return np.searchsorted(sorted_values, sorted_queries, side="left")
+    starts = np.arange(0, n, block)
+    bounds = np.append(np.searchsorted(sorted_values, sorted_queries[starts], side="left"),
+                       sorted_values.size)
+    out = np.empty(n, dtype=np.intp)
+    for b, s in enumerate(starts):  # n / block iterations, each a vectorised search
+        k0, k1 = bounds[b], min(bounds[b + 1] + 1, sorted_values.size)
+        out[s:s + block] = np.searchsorted(sorted_values[k0:k1], sorted_queries[s:s + block],
+                                           side="left") + k0
+    return out
 
 
 def focal_intervals(focal, bound: float, mode: str = "relative"):

@@ -54,7 +54,7 @@ from msg_adapters import (
     stamp_ns,
 )
 
-from ..core import FocalWindow, estimate_focal
+from ..core import FocalWindow, estimate_focal, estimate_poses
 from ..core.camera import image_centre
 from .calibration import default_calibration_path, write_calibration
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
@@ -671,7 +671,8 @@ class FcopNode(Node):
         objects = []
         if p["publish_poses"] or p["publish_markers"]:
             # Poses at the window's focal length: steadier than the frame's own.
-            objects = est.poses_at(ready.focal) if est.focal is not None else []
+            objects = (estimate_poses(est.instances, ready.focal, exclude=est.mirrored)
+                       if est.focal is not None else [])
             poses = object_poses(objects)  # one quaternion conversion for both messages
             if p["publish_poses"]:
                 self.pub_poses.publish(pose_array(objects, depth_msg.header, poses))
