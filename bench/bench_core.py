@@ -30,8 +30,9 @@ import cv2
 import numpy as np
 from world_accuracy import plain_reference  # bench/ is on the path of this script
 
-from fcop_ros import FocalWindow, estimate_focal, estimate_poses, interval_stabbing, solve_triplets
-from fcop_ros.core import DEFAULTS
+from fcop_ros import (FocalWindow, WindowOptions, estimate_focal, estimate_poses,
+                      interval_stabbing, solve_triplets)
+from fcop_ros.core import EstimatorOptions
 from fcop_ros.core.camera import image_centre
 from fcop_ros.core.correspondences import extract_instances
 from fcop_ros.core.object_fit import fit_objects
@@ -108,16 +109,16 @@ def stabbing(rng):
 
 def stages(frames, repeats):
     """Per-frame cost of the estimator's stages, called as estimate_focal calls them."""
-    opt = DEFAULTS
+    opt = EstimatorOptions()
     h, w = frames[0].depth.shape
     pp = image_centre(w, h)
 
     def extract(fr):
         return extract_instances(
-            fr.depth, fr.nocs, fr.mask, pp, min_object_pixels=opt["min_object_pixels"],
-            erode_px=opt["erode_px"], denoise_radius=opt["denoise_radius"],
-            outlier_sigma=opt["outlier_sigma"], edge_sigma=opt["edge_sigma"],
-            max_pixels=opt["max_pixels"], max_instances=opt["max_instances"],
+            fr.depth, fr.nocs, fr.mask, pp, min_object_pixels=opt.min_object_pixels,
+            erode_px=opt.erode_px, denoise_radius=opt.denoise_radius,
+            outlier_sigma=opt.outlier_sigma, edge_sigma=opt.edge_sigma,
+            max_pixels=opt.max_pixels, max_instances=opt.max_instances,
             rng=np.random.default_rng(0))
     inst = [extract(fr) for fr in frames]
     rng = np.random.default_rng(0)
@@ -125,7 +126,7 @@ def stages(frames, repeats):
     for ins in inst:
         sizes = [len(i.d) for i in ins]
         offs = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        tri = np.concatenate([sample_triplets(n, opt["triplets_per_object"], rng) + o
+        tri = np.concatenate([sample_triplets(n, opt.triplets_per_object, rng) + o
                               for n, o in zip(sizes, offs)])
         data.append((np.concatenate([i.x for i in ins]), np.concatenate([i.d for i in ins]),
                      np.concatenate([i.p for i in ins]), tri))
@@ -137,7 +138,7 @@ def stages(frames, repeats):
         "stabbing": frame_times(lambda fr, k: stab_equal_width(np.log(votes[k]), np.log1p(0.05)),
                                 frames, repeats),
         "per-object fit": frame_times(lambda fr, k: fit_objects(
-            inst[k], 600.0, max_pixels=opt["fit_pixels"], iterations=opt["fit_iterations"],
+            inst[k], 600.0, max_pixels=opt.fit_pixels, iterations=opt.fit_iterations,
             rng=np.random.default_rng(k)), frames, repeats),
         "pose stage (estimate_poses)": frame_times(lambda fr, k: estimate_poses(inst[k], 600.0),
                                                    frames, repeats),
@@ -205,7 +206,7 @@ def main() -> None:
     print("estimate_focal 1000x1000, 10,000 instances of 100 px: "
           f"{1000 * t_many:.0f} ms (best of 3)")
 
-    window = FocalWindow(max_frames=30)
+    window = FocalWindow(WindowOptions(max_frames=30))
     ests = [estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k) for k, fr in enumerate(frames)]
     for k in range(30):
         window.add(ests[k % len(ests)], k / 30)

@@ -13,6 +13,7 @@ scale without depth), the share of frames with an estimate and the time, per noi
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 import time
 
 import numpy as np
@@ -74,10 +75,10 @@ def main() -> None:
             fr.depth, fr.nocs, fr.mask, seed=k
         ),
         "paper fCOP-IS literal (5 px)": lambda fr, k: estimate_focal(
-            fr.depth, fr.nocs, fr.mask, seed=k, **LITERAL
+            fr.depth, fr.nocs, fr.mask, options=LITERAL, seed=k
         ),
         "paper fCOP-RANSAC": lambda fr, k: estimate_focal(
-            fr.depth, fr.nocs, fr.mask, seed=k, **{**LITERAL, "method": "ransac"}
+            fr.depth, fr.nocs, fr.mask, options=replace(LITERAL, method="ransac"), seed=k
         ),
     }
     print(

@@ -23,7 +23,7 @@ import time
 import numpy as np
 from scipy import ndimage
 
-from fcop_ros import FocalWindow, estimate_focal, interval_stabbing, solve_triplets
+from fcop_ros import FocalWindow, WindowOptions, estimate_focal, interval_stabbing, solve_triplets
 from fcop_ros.core import PAPER_FCOP_IS
 from fcop_ros.core.camera import image_centre
 from fcop_ros.core.stabbing import focal_intervals
@@ -89,7 +89,7 @@ def methods(have_colmap):
     out = {
         "fcop_ros": lambda fr, k: estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False),
         "paper's method taken literally": lambda fr, k: (
-            estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, **PAPER_FCOP_IS).focal
+            estimate_focal(fr.depth, fr.nocs, fr.mask, options=PAPER_FCOP_IS, seed=k).focal
         ),
         "plain reference (issue 8)": lambda fr, k: plain_reference(fr, np.random.default_rng(k)),
     }
@@ -147,7 +147,7 @@ def bias(frames, first_seed, variant):
 def run_sequence(preset, seed, n, variant, zoom=1.0):
     seq = world_frames(preset, seed, n, variant, zoom_frame=n // 2 if zoom != 1.0 else None,
                        zoom_factor=zoom)
-    win = FocalWindow(max_frames=30)
+    win = FocalWindow(WindowOptions(max_frames=30))
     rows = []
     for k, fr in enumerate(seq.frames):
         est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False)

@@ -25,7 +25,7 @@ def literal_error(fam, frames: int, first_seed: int = 1000) -> np.ndarray:
     err = []
     for s in range(frames):
         fr = world_frame(fam, first_seed + s)
-        est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, **PAPER_FCOP_IS)
+        est = estimate_focal(fr.depth, fr.nocs, fr.mask, options=PAPER_FCOP_IS, seed=s)
         err.append(np.nan if est.focal is None else 100 * abs(est.focal / fr.focal - 1))
     return np.array(err)
 

@@ -34,3 +34,13 @@ def test_readme_parameter_table_lists_every_parameter_with_its_default():
             else '""'
         )
         assert shown == expected, (name, shown, expected)
+
+
+def test_the_node_defaults_are_the_library_defaults():
+    """The node's option-backed parameters take their defaults from fcop_ros.core.options: at
+    their defaults it builds exactly the estimator's and the window's default settings."""
+    from fcop_ros.core.options import EstimatorOptions, WindowOptions
+    from fcop_ros.ros.params import defaults, estimator_options, window_options
+
+    assert estimator_options(defaults()) == EstimatorOptions()
+    assert window_options(defaults()) == WindowOptions()

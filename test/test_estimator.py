@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fcop_ros import FocalEstimate, estimate_focal, estimate_poses
+from fcop_ros import EstimatorOptions, FocalEstimate, NoiseBound, estimate_focal, estimate_poses
 from fcop_ros.core.pose import rotation_angle_deg
 from fcop_ros.synthetic.scenes import BAD_CASES, clean_frame, corrupted, noisy_frame
 
@@ -82,23 +82,25 @@ def test_principal_point_can_be_given():
 
 def test_ransac_variant_is_selectable():
     fr = clean_frame(0)
-    est = estimate_focal(fr.depth, fr.nocs, fr.mask, method="ransac", seed=0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, options=EstimatorOptions(method="ransac"),
+                         seed=0)
     assert est.method == "ransac" and abs(est.focal / fr.focal - 1) < 0.01 and est.objects
 
 
 def test_literal_paper_method_on_clean_frame():
     """Absolute 5 px bound, no refinement, no denoising: the paper's fCOP-IS."""
     fr = clean_frame(0)
-    est = estimate_focal(fr.depth, fr.nocs, fr.mask, bound_mode="absolute", noise_bound=5.0,
-                         refine=False, denoise_radius=0, erode_px=0, outlier_sigma=0, seed=0)
+    opt = EstimatorOptions(noise_bound=NoiseBound(5.0, "absolute"), refine=False,
+                           denoise_radius=0, erode_px=0, outlier_sigma=0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, options=opt, seed=0)
     assert abs(est.focal / fr.focal - 1) < 0.01 and est.interval[0] <= est.focal <= est.interval[1]
 
 
-def _errors(preset, seeds, **opt):
+def _errors(preset, seeds, opt=None):
     focal, rot, trans = [], [], []
     for s in seeds:
         fr = noisy_frame(s, preset)
-        est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, **opt)
+        est = estimate_focal(fr.depth, fr.nocs, fr.mask, options=opt, seed=s)
         focal.append(np.nan if est.focal is None else 100 * abs(est.focal / fr.focal - 1))
         for got, true in _match(est, fr):
             rot.append(rotation_angle_deg(got.rotation, true.rotation))
@@ -152,10 +154,12 @@ class TestBadInput:
             estimate_focal(self.depth, self.nocs, self.mask.astype(float))
 
     def test_unknown_or_invalid_option(self):
-        with pytest.raises(TypeError, match="unknown option"):
-            estimate_focal(self.depth, self.nocs, self.mask, triplets=5)
+        with pytest.raises(TypeError, match="triplets"):
+            EstimatorOptions(triplets=5)
         with pytest.raises(ValueError, match="focal_range"):
-            estimate_focal(self.depth, self.nocs, self.mask, focal_range=(100, 10))
+            EstimatorOptions(focal_range=(100, 10))
+        with pytest.raises(ValueError, match="noise bound"):
+            NoiseBound(0.8, "relative")
 
     @pytest.mark.parametrize("case", sorted(BAD_CASES))
     def test_no_evidence_gives_none(self, case):

@@ -98,7 +98,7 @@ def test_params_file_values_are_loaded(harness, tmp_path):
     path.write_text(text)
     h = harness(node_args=["--ros-args", "--params-file", str(path)])
     assert h.node.get_parameter("window_frames").value == 7
-    assert h.node.window.max_frames == 7 and h.node.sync.slop_ns == 10_000_000
+    assert h.node.window.options.max_frames == 7 and h.node.sync.slop_ns == 10_000_000
     assert h.node.get_parameter("depth_scale").value == 0.001
     # Every parameter has a description, and numbers a range.
     for name in h.node.p:
@@ -115,7 +115,7 @@ def test_runtime_parameter_changes(harness):
                               Parameter("sync_mode", value="approximate"),
                               Parameter("sync_slop", value=0.02)])
     assert all(r.successful for r in ok)
-    assert node.window.max_frames == 10 and node.sync.slop_ns == 20_000_000
+    assert node.window.options.max_frames == 10 and node.sync.slop_ns == 20_000_000
     # Type and range: the descriptors, which rclpy applies before the node's callback runs.
     refused = (("window_frames", 0, "out of range"), ("focal_min", 0.5, "out of range"),
                ("queue_size", "five", "Wrong parameter type"))

@@ -50,7 +50,7 @@ def test_shipped_params_file_applies_under_a_namespace_and_another_name(harness,
     assert h.node.get_fully_qualified_name() == "/camera/focal"
     assert (
         h.node.p["window_frames"] == 7
-        and h.node.window.max_frames == 7
+        and h.node.window.options.max_frames == 7
         and h.node.sync.slop_ns == 10_000_000
     )
     # Outputs beside the inputs.

@@ -103,11 +103,11 @@ def check_min_frames(h):
     assert h.node.window.current.focal is not None
 
 
-def check_min_support(h):
+def check_min_window_votes(h):
     frames_then(h, 2)
-    set_ok(h, min_support=10_000_000)
+    set_ok(h, min_window_votes=10_000_000)
     assert h.node.window.current.focal is None and len(h.node.window) == 2
-    set_ok(h, min_support=30)
+    set_ok(h, min_window_votes=30)
     assert h.node.window.current.focal is not None
 
 

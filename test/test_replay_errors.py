@@ -118,12 +118,13 @@ def test_params_file_sections_for_any_namespace(tmp_path):
     pf = tmp_path / "p.yaml"
     pf.write_text("other:\n  ros__parameters:\n    window_frames: 999\n"
                   "/camera/fcop_node:\n  ros__parameters:\n    window_frames: 7\n    seed: 5\n"
-                  "/**:\n  ros__parameters:\n    window_frames: 9\n    min_support: 40\n"
+                  "/**:\n  ros__parameters:\n    window_frames: 9\n    min_window_votes: 40\n"
                   "    use_sim_time: false\n"
                   "robot:\n  arm:\n    fcop_node:\n      ros__parameters:\n"
                   "        min_frames: 3\n")
     assert replay_params.load_params_file(pf) == {
-        "window_frames": 7, "min_support": 40, "use_sim_time": False, "seed": 5, "min_frames": 3}
+        "window_frames": 7, "min_window_votes": 40, "use_sim_time": False, "seed": 5,
+        "min_frames": 3}
     params = replay_params.node_parameters(
         str(pf), ["seed:=11", "focal_min:=60", "noise_bound_mode:=absolute", "noise_bound:=5"])
     assert params["seed"] == 11 and params["window_frames"] == 7

@@ -3,7 +3,7 @@ zoom re-convergence, image-size changes, limits."""
 import numpy as np
 import pytest
 
-from fcop_ros import FocalWindow
+from fcop_ros import FocalWindow, WindowOptions
 from fcop_ros.core.estimator import FocalEstimate
 
 
@@ -25,16 +25,16 @@ def frames(rng, n, focal=600.0, sigma=0.03, persistent=0.0):
 
 
 def test_no_focal_without_evidence():
-    w = FocalWindow(min_frames=3)
+    w = FocalWindow(WindowOptions(min_frames=3))
     assert w.current.focal is None
     for k in range(5):
         assert w.add(empty_estimate(), k * 0.1).focal is None
-    w2 = FocalWindow(min_frames=3)
+    w2 = FocalWindow(WindowOptions(min_frames=3))
     w2.add(estimate(600.0), 0.0)
     r = w2.add(estimate(600.0), 0.1)
     assert r.focal is None and "2 of 3" in r.reason
     assert w2.add(estimate(600.0), 0.2).focal is not None
-    w3 = FocalWindow(min_support=1000)
+    w3 = FocalWindow(WindowOptions(min_window_votes=1000))
     assert w3.add(estimate(600.0, support=400), 0.0).focal is None
     assert w3.add(estimate(600.0, support=700), 0.1).focal is not None
 
@@ -46,7 +46,7 @@ def test_window_averages_independent_errors_and_says_so():
     rng = np.random.default_rng(0)
     err, cover, std = [], [], []
     for _ in range(200):
-        w = FocalWindow(max_frames=30)
+        w = FocalWindow(WindowOptions(max_frames=30))
         for k, e in enumerate(frames(rng, 30)):
             r = w.add(e, k / 30)
         err.append(abs(np.log(r.focal / 600.0)))
@@ -65,7 +65,7 @@ def test_window_does_not_claim_to_average_away_persistent_error():
     rng = np.random.default_rng(1)
     cover, std = [], []
     for _ in range(200):
-        w = FocalWindow(max_frames=30)
+        w = FocalWindow(WindowOptions(max_frames=30))
         for k, e in enumerate(frames(rng, 30, sigma=0.005, persistent=0.04)):
             r = w.add(e, k / 30)
         cover.append(abs(np.log(r.focal / 600.0)) <= 2 * r.std_rel)
@@ -87,7 +87,7 @@ def test_reconverges_after_zoom(step):
     """After a focal change of 20% or more with 3% frame noise: detected within 5 frames, the
     window within 5% of the new focal length for good within 15 frames, one restart."""
     rng = np.random.default_rng(2)
-    w = FocalWindow(max_frames=30)
+    w = FocalWindow(WindowOptions(max_frames=30))
     for k, e in enumerate(frames(rng, 30)):
         w.add(e, k / 30)
     errors, changed_at = [], None
@@ -103,7 +103,7 @@ def test_reconverges_after_zoom(step):
 
 def test_no_restart_on_static_sequences_with_outlier_frames():
     rng = np.random.default_rng(3)
-    w = FocalWindow(max_frames=30)
+    w = FocalWindow(WindowOptions(max_frames=30))
     for k, e in enumerate(frames(rng, 300)):
         if k % 17 == 0:
             e = estimate(e.focal * 1.4, e.std_rel)  # a lone wild frame
@@ -120,7 +120,7 @@ def test_image_size_change_starts_a_new_window():
 
 
 def test_max_frames_max_age_and_reset():
-    w = FocalWindow(max_frames=5, max_age=0.25)
+    w = FocalWindow(WindowOptions(max_frames=5, max_age=0.25))
     for k in range(10):
         w.add(estimate(600.0), k * 0.1)
     assert len(w) == 3  # stamps 0.7, 0.8, 0.9 are within 0.25 s of 0.9
@@ -130,11 +130,11 @@ def test_max_frames_max_age_and_reset():
 
 def test_invalid_settings_are_refused():
     with pytest.raises(ValueError):
-        FocalWindow(max_frames=0)
+        FocalWindow(WindowOptions(max_frames=0))
     with pytest.raises(ValueError):
-        FocalWindow(max_age=-1)
+        FocalWindow(WindowOptions(max_age=-1))
     with pytest.raises(ValueError):
-        FocalWindow(change_threshold=0)
+        FocalWindow(WindowOptions(change_threshold=0))
 
 
 def test_wild_frames_are_judged_by_the_frames_own_spread():
@@ -142,7 +142,7 @@ def test_wild_frames_are_judged_by_the_frames_own_spread():
     noise, 1% stated) must still lose a wild frame: judged against their stated 1%, a +0.5%
     frame would pass and pull the window 20 times further than the noise does."""
     rng = np.random.default_rng(4)
-    w = FocalWindow(max_frames=30)
+    w = FocalWindow(WindowOptions(max_frames=30))
     for k in range(30):
         e = rng.normal(0, 1e-4) + (0.005 if k % 10 == 3 else 0.0)
         r = w.add(estimate(600.0 * np.exp(e), 0.01, std_rel_noise=1e-4), k / 30)

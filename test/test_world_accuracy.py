@@ -6,7 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from fcop_ros import FocalWindow, estimate_focal
+from fcop_ros import EstimatorOptions, FocalWindow, WindowOptions, estimate_focal
 from fcop_ros.synthetic import scenes
 from fcop_ros.synthetic.world import ZERO_MEAN_FAMILIES, world_frames
 
@@ -61,7 +61,7 @@ def test_window_averages_on_moving_camera():
     single, win, cover, restarts = [], [], [], 0
     for q in range(8):
         seq = world_frames("predicted", FIRST_SEED + 500 + q, 30, size=(320, 240))
-        w = FocalWindow(max_frames=30)
+        w = FocalWindow(WindowOptions(max_frames=30))
         for k, fr in enumerate(seq.frames):
             est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False)
             r = w.add(est, k / 30)
@@ -129,7 +129,8 @@ def test_focal_range_bounds_every_result():
     est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0)
     assert est.focal is not None
     for lo, hi in ((1.2 * fr.focal, 3 * fr.focal), (0.2 * fr.focal, 0.8 * fr.focal)):
-        out = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0, focal_range=(lo, hi))
+        out = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0,
+                             options=EstimatorOptions(focal_range=(lo, hi)))
         assert (
             out.focal is None
             and "focal_range" in out.reason
@@ -148,7 +149,8 @@ def test_ten_thousand_instances_are_answered_with_linear_work():
     depth = 1.0 + 0.0001 * xx + 0.0002 * yy
     nocs = np.stack([(xx % 10) / 10, (yy % 10) / 10, np.full((n, n), 0.5)], -1)
     t = time.perf_counter()
-    est = estimate_focal(depth, nocs, mask, seed=0, min_object_pixels=50, max_instances=64)
+    opt = EstimatorOptions(min_object_pixels=50, max_instances=64)
+    est = estimate_focal(depth, nocs, mask, options=opt, seed=0)
     elapsed = time.perf_counter() - t
     assert est.instances_skipped == 10_000 - 64
     assert est.focal is None or est.std_rel is not None

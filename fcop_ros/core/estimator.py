@@ -9,6 +9,7 @@ explain their shape are refused -> a random-effects combination of the objects' 
 the combined focal length. ``method="ransac"`` replaces stabbing by the paper's RANSAC variant;
 ``refine=False`` stops at the stabbed votes (the paper's method).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -21,46 +22,8 @@ from .correspondences import Instance, check_images, extract_instances
 from .object_fit import fit_objects
 from .pose import ObjectPose, umeyama
 from .solver import sample_triplets, solve_triplets
-from .stabbing import focal_intervals, interval_stabbing, stab_equal_width
-
-DEFAULTS = dict(
-    triplets_per_object=1500,   # random triplets drawn on each object
-    noise_bound=0.05,           # stabbing half-width: relative (fraction) or pixels
-    bound_mode="relative",      # "relative" (log f) or "absolute" (pixels, the paper's 5 px)
-    focal_range=(50.0, 20000.0),  # votes outside are discarded, and no focal outside is reported (px)
-    min_object_pixels=50,
-    erode_px=1,
-    denoise_radius=2,
-    outlier_sigma=4.0,
-    edge_sigma=2.0,             # drop pixels whose depth gradient exceeds this many robust sigmas (0: off)
-    max_pixels=2000,
-    max_instances=64,           # the largest instances considered per frame; the rest are counted, not used
-    min_support=30,             # inlier votes needed before a focal is reported
-    min_inlier_ratio=0.05,
-    refine=True,                # per-object maximum-likelihood fit and random-effects combination
-    min_fit_quality=0.85,       # share of an object's 3D variance its NOCS must explain to count
-    min_nocs_spread=0.1,        # RMS spread of an object's visible NOCS (a real object's part spans the cube)
-    unseen_depth_error=0.3,     # unmodelled depth error, relative to the fitted depth-error gradients
-    shape_error=0.1,            # per-object systematic error: shape_error * sqrt(unexplained share of its shape)
-    object_tau=0.005,           # prior between-object spread of log f beyond the terms above
-    object_tau_weight=2.0,      # that prior's weight, in objects
-    fit_pixels=300,             # pixels per object in the maximum-likelihood fit
-    fit_iterations=10,          # its Gauss-Newton iterations
-    depth_tilt=True,            # fit each object's local depth-error gradient as a nuisance
-    pose_max_std=0.25,          # no pose for an object whose own focal std_rel is above this
-    poses=True,                 # False: leave poses to estimate_poses (e.g. at a window's focal)
-    method="stabbing",          # or "ransac"
-    ransac_hypotheses=400,
-    ransac_threshold=0.005,     # metres
-    seed=None,
-)
-
-
-# The paper's fCOP-IS taken literally: uniform triplets on raw pixels, a 5 px bound, the
-# interval midpoint, no refinement and no evidence threshold (it always answers).
-PAPER_FCOP_IS = dict(bound_mode="absolute", noise_bound=5.0, refine=False, denoise_radius=0, erode_px=0,
-                     outlier_sigma=0, edge_sigma=0, min_support=1, min_inlier_ratio=0.0, min_fit_quality=0.0,
-                     min_nocs_spread=0.0)
+from .options import EstimatorOptions
+from .stabbing import interval_stabbing, stab_equal_width
 
 
 @dataclass
@@ -71,14 +34,15 @@ class FocalEstimate:
     ``reason`` says why). std_rel: relative standard error of focal (from the objects' fits and
     their disagreement). std_rel_noise: the part of std_rel that pixel noise makes, which a new
     frame draws anew (the rest, from shape mismatch, unseen depth error and the objects'
-    disagreement, repeats while the same objects are in view). focal_votes: the stabbed value of the triplet votes. interval: (lo, hi)
-    focal range in pixels of the maximal consensus region. inlier_count / inlier_ratio: votes
-    agreeing with it. votes_per_object / inliers_per_object: {instance_id: count}.
-    object_focals: {instance_id: (focal, std_rel)} of the objects combined; rejected:
-    {instance_id: why} of instances not used; mirrored: instance ids whose NOCS fit only as a
-    reflection (channel order or axis convention); instances_skipped: instances beyond
-    ``max_instances`` (the smallest), not used; objects: poses of the combined, unmirrored
-    objects (see :mod:`fcop_ros.core.pose`); votes: all valid triplet votes (px);
+    disagreement, repeats while the same objects are in view). focal_votes: the stabbed value of
+    the triplet votes. interval: (lo, hi) focal range in pixels of the maximal consensus region.
+    inlier_count / inlier_ratio: votes agreeing with it. votes_per_object / inliers_per_object:
+    {instance_id: count}. object_focals: {instance_id: (focal, std_rel)} of the objects
+    combined; rejected: {instance_id: why} of instances not used; mirrored: instance ids whose
+    NOCS fit only as a reflection (channel order or axis convention); instances_skipped:
+    instances beyond ``max_instances`` (the smallest), not used; objects: poses of the combined,
+    unmirrored objects when ``estimate_focal`` ran the pose stage (see :mod:`.pose`); votes: all
+    valid triplet votes (px);
     instances: the :class:`~.correspondences.Instance` s of the objects that made the estimate,
     the input of the pose stage: ``estimate_poses(est.instances, focal, exclude=est.mirrored)``
     at any focal length, e.g. a window's.
@@ -105,34 +69,16 @@ class FocalEstimate:
     instances_skipped: int = 0
     instances: list = field(default_factory=list, repr=False)
 
-    def poses_at(self, focal: float) -> list[ObjectPose]:
-        """``estimate_poses(self.instances, focal, exclude=self.mirrored)``, or ``objects`` when
-        they were made at this focal length."""
-        if self.objects and self.focal is not None and focal == self.focal:
-            return list(self.objects)
-        return estimate_poses(self.instances, focal, exclude=self.mirrored)
 
-
-def _options(options: dict) -> dict:
-    unknown = set(options) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"estimate_focal: unknown option(s) {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    opt = {**DEFAULTS, **options}
-    lo, hi = opt["focal_range"]
-    if not (0 < lo < hi):
-        raise ValueError(f"focal_range must satisfy 0 < min < max, got {opt['focal_range']}")
-    if opt["method"] not in ("stabbing", "ransac"):
-        raise ValueError(f"method must be 'stabbing' or 'ransac', got {opt['method']!r}")
-    return opt
-
-
-def _votes(instances: list[Instance], opt: dict, rng: np.random.Generator):
+def _votes(instances: list[Instance], opt: EstimatorOptions, rng: np.random.Generator):
     """Minimal-solver votes of every object, solved in one call: (focal (V,), owner index (V,))."""
-    lo, hi = opt["focal_range"]
+    lo, hi = opt.focal_range
     sizes = np.array([len(inst.d) for inst in instances])
     offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    n_tri = int(opt["triplets_per_object"])
-    tri = np.concatenate([sample_triplets(int(n), n_tri, rng) + off for n, off in zip(sizes, offsets)])
+    n_tri = int(opt.triplets_per_object)
+    tri = np.concatenate(
+        [sample_triplets(int(n), n_tri, rng) + off for n, off in zip(sizes, offsets)]
+    )
     owner = np.repeat(np.arange(len(instances)), [n_tri if n >= 3 else 0 for n in sizes])
     x = np.concatenate([inst.x for inst in instances])
     d = np.concatenate([inst.d for inst in instances])
@@ -142,8 +88,9 @@ def _votes(instances: list[Instance], opt: dict, rng: np.random.Generator):
     return f[ok], owner[ok]
 
 
-def estimate_poses(instances, focal: float, *, exclude=(),
-                   rng: np.random.Generator | None = None) -> list[ObjectPose]:
+def estimate_poses(
+    instances, focal: float, *, exclude=(), rng: np.random.Generator | None = None
+) -> list[ObjectPose]:
     """The pose stage: the pose of each instance at ``focal`` (e.g. a window's focal length).
 
     instances: items with instance_id, x, d, p (a :class:`FocalEstimate`'s ``instances``: the
@@ -156,18 +103,29 @@ def estimate_poses(instances, focal: float, *, exclude=(),
         return []
     fits = fit_objects(instances, float(focal), fix_focal=True, proper=True, iterations=6, rng=rng)
     skip = set(exclude)
-    return [ObjectPose(inst.instance_id, fits.rotation[k], fits.translation[k], float(fits.scale[k]),
-                       float(fits.inlier_ratio[k]), float(fits.sigma_depth[k]), int(len(inst.d)))
-            for k, inst in enumerate(instances)
-            if fits.ok[k] and not fits.mirrored[k] and np.linalg.det(fits.rotation[k]) > 0
-            and inst.instance_id not in skip]
+    return [
+        ObjectPose(
+            inst.instance_id,
+            fits.rotation[k],
+            fits.translation[k],
+            float(fits.scale[k]),
+            float(fits.inlier_ratio[k]),
+            float(fits.sigma_depth[k]),
+            int(len(inst.d)),
+        )
+        for k, inst in enumerate(instances)
+        if fits.ok[k]
+        and not fits.mirrored[k]
+        and np.linalg.det(fits.rotation[k]) > 0
+        and inst.instance_id not in skip
+    ]
 
 
 def _ransac(instances, opt, rng):
     """The paper's fCOP-RANSAC: a triplet gives f and, by Umeyama on its three points, a pose;
     the hypothesis with most pixels within ``ransac_threshold`` metres of its object wins."""
-    lo, hi = opt["focal_range"]
-    nh = int(opt["ransac_hypotheses"])
+    lo, hi = opt.focal_range
+    nh = int(opt.ransac_hypotheses)
     owner = rng.integers(0, len(instances), nh)
     counts = np.array([len(i.d) for i in instances])
     nmax = int(min(counts.max(), 1000))
@@ -191,8 +149,12 @@ def _ransac(instances, opt, rng):
     m = int(ok.sum())
     if m:
         # Each hypothesis' three points laid out consecutively, so triplet k is (3k, 3k+1, 3k+2).
-        fv, _, okv = solve_triplets(xs[ok].reshape(-1, 2), ds[ok].reshape(-1), ps[ok].reshape(-1, 3),
-                                    np.arange(3 * m).reshape(-1, 3))
+        fv, _, okv = solve_triplets(
+            xs[ok].reshape(-1, 2),
+            ds[ok].reshape(-1),
+            ps[ok].reshape(-1, 3),
+            np.arange(3 * m).reshape(-1, 3),
+        )
         f[ok] = fv
         ok[ok] = okv
     ok &= (f >= lo) & (f <= hi)
@@ -203,15 +165,26 @@ def _ransac(instances, opt, rng):
     tri_pts = np.concatenate([xs[h] / fh[..., None] * ds[h][..., None], ds[h][..., None]], axis=-1)
     s, R, t = umeyama(ps[h] - 0.5, tri_pts)
     Xo = X[owner[h]]
-    pts = np.concatenate([Xo / fh[..., None] * D[owner[h]][..., None], D[owner[h]][..., None]], axis=-1)
+    pts = np.concatenate(
+        [Xo / fh[..., None] * D[owner[h]][..., None], D[owner[h]][..., None]], axis=-1
+    )
     pred = s[:, None, None] * np.einsum("hij,hnj->hni", R, P[owner[h]] - 0.5) + t[:, None, :]
     res = np.linalg.norm(pts - pred, axis=-1)
-    score = ((res < opt["ransac_threshold"]) & M[owner[h]]).sum(1) / np.maximum(n_o[owner[h]], 1)
+    score = ((res < opt.ransac_threshold) & M[owner[h]]).sum(1) / np.maximum(n_o[owner[h]], 1)
     best = int(np.argmax(score))
     return float(f[h[best]]), int(round(score[best] * n_o[owner[h[best]]])), owner
 
 
-def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalEstimate:
+def estimate_focal(
+    depth,
+    nocs,
+    mask,
+    principal_point=None,
+    options: EstimatorOptions | None = None,
+    *,
+    seed=None,
+    poses: bool = True,
+) -> FocalEstimate:
     """Estimate the focal length (pixels, fx = fy) of one frame and the poses of its objects.
 
     Args:
@@ -220,40 +193,67 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
         nocs: (H,W,3) NOCS in [0,1]; all-zero pixels have no prediction.
         mask: (H,W) integer instance ids, 0 = background.
         principal_point: (cx, cy) pixels; default ((W-1)/2, (H-1)/2).
-        **options: see ``DEFAULTS`` in this module (unknown names raise TypeError).
+        options: an :class:`EstimatorOptions` (default: fcop_ros's settings;
+            ``PAPER_FCOP_IS``: the paper's method taken literally).
+        seed: of the random triplets and pixel subsets (None: from the OS).
+        poses: also run the pose stage (:func:`estimate_poses`) at the frame's focal length;
+            False leaves it to the caller, e.g. at a window's focal length.
 
     Returns a :class:`FocalEstimate`; ``focal`` is None when there is no evidence, never a
     made-up number. Mismatched or malformed images raise ValueError.
     """
-    opt = _options(options)
+    opt = EstimatorOptions() if options is None else options
     depth, nocs, mask = check_images(depth, nocs, mask)
     h, w = depth.shape
-    pp = image_centre(w, h) if principal_point is None else tuple(float(v) for v in principal_point)
-    rng = np.random.default_rng(opt["seed"])
-    base = dict(principal_point=pp, image_size=(w, h), method=opt["method"])
-    instances = extract_instances(depth, nocs, mask, pp, min_object_pixels=opt["min_object_pixels"],
-                                  erode_px=opt["erode_px"], denoise_radius=opt["denoise_radius"],
-                                  outlier_sigma=opt["outlier_sigma"], edge_sigma=opt["edge_sigma"],
-                                  max_pixels=opt["max_pixels"], max_instances=opt["max_instances"], rng=rng)
+    pp = (
+        image_centre(w, h) if principal_point is None else tuple(float(v) for v in principal_point)
+    )
+    rng = np.random.default_rng(seed)
+    base = dict(principal_point=pp, image_size=(w, h), method=opt.method)
+    instances = extract_instances(
+        depth,
+        nocs,
+        mask,
+        pp,
+        min_object_pixels=opt.min_object_pixels,
+        erode_px=opt.erode_px,
+        denoise_radius=opt.denoise_radius,
+        outlier_sigma=opt.outlier_sigma,
+        edge_sigma=opt.edge_sigma,
+        max_pixels=opt.max_pixels,
+        max_instances=opt.max_instances,
+        rng=rng,
+    )
     if not instances:
-        return FocalEstimate(None, reason=f"no instance with >= {opt['min_object_pixels']} valid pixels", **base)
+        return FocalEstimate(
+            None, reason=f"no instance with >= {opt.min_object_pixels} valid pixels", **base
+        )
     base["instances_skipped"] = getattr(instances, "skipped", 0)
 
-    if opt["method"] == "ransac":
+    if opt.method == "ransac":
         f, support, _ = _ransac(instances, opt, rng)
         if f is None:
             return FocalEstimate(None, reason="no valid RANSAC hypothesis", **base)
-        return _finish(FocalEstimate(None, inlier_count=support, focal_votes=f, **base), f, None, instances,
-                       opt, rng)
+        return _finish(
+            FocalEstimate(None, inlier_count=support, focal_votes=f, **base),
+            f,
+            None,
+            instances,
+            opt,
+            rng,
+            poses,
+        )
 
     votes, owner = _votes(instances, opt, rng)
     ids = [inst.instance_id for inst in instances]
     per_obj = dict(zip(ids, np.bincount(owner, minlength=len(ids)).tolist()))
     if votes.size == 0:
-        return FocalEstimate(None, votes_per_object=per_obj, reason="no valid triplet (degenerate geometry)", **base)
-    lo, hi, back = focal_intervals(votes, opt["noise_bound"], opt["bound_mode"])
-    if opt["bound_mode"] == "relative":  # one width in log f: one sort of the centres
-        st = stab_equal_width(np.log(votes), np.log1p(opt["noise_bound"]))
+        return FocalEstimate(
+            None, votes_per_object=per_obj, reason="no valid triplet (degenerate geometry)", **base
+        )
+    lo, hi, back = opt.noise_bound.intervals(votes)
+    if opt.noise_bound.equal_widths:  # one width in log f: one sort of the centres
+        st = stab_equal_width(np.log(votes), opt.noise_bound.log_half_width)
     else:
         st = interval_stabbing(lo, hi)
     inl = st.inliers
@@ -261,47 +261,75 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
     ratio = count / votes.size
     interval = (float(back(st.region[0])), float(back(st.region[1])))
     inl_obj = dict(zip(ids, np.bincount(owner[inl], minlength=len(ids)).tolist()))
-    est = FocalEstimate(None, inlier_count=count, inlier_ratio=ratio, interval=interval,
-                        votes_per_object=per_obj, inliers_per_object=inl_obj, votes=votes, **base)
-    if count < opt["min_support"] or ratio < opt["min_inlier_ratio"]:
+    est = FocalEstimate(
+        None,
+        inlier_count=count,
+        inlier_ratio=ratio,
+        interval=interval,
+        votes_per_object=per_obj,
+        inliers_per_object=inl_obj,
+        votes=votes,
+        **base,
+    )
+    if count < opt.min_frame_votes or ratio < opt.min_inlier_ratio:
         est.reason = f"too little consensus: {count} agreeing votes ({ratio:.1%}) of {votes.size}"
         return est
     f0 = float(back(st.point))
     est.focal_votes = f0
-    if not opt["refine"]:
-        return _finish(est, f0, None, instances, opt, rng)
+    if not opt.refine:
+        return _finish(est, f0, None, instances, opt, rng, poses)
     support = list(instances)
-    seed = int(rng.integers(2 ** 32))
-    fits = fit_objects(support, f0, max_pixels=opt["fit_pixels"], depth_tilt=opt["depth_tilt"],
-                       iterations=opt["fit_iterations"],
-                       rng=np.random.default_rng(seed))
-    spread = np.array([np.sqrt(np.mean(np.sum((i.p - i.p.mean(0)) ** 2, axis=1))) for i in support])
-    good = (fits.ok & (fits.quality >= opt["min_fit_quality"]) & np.isfinite(fits.var_log_focal)
-            & (spread >= opt["min_nocs_spread"]))
+    seed = int(rng.integers(2**32))
+    fits = fit_objects(
+        support,
+        f0,
+        max_pixels=opt.fit_pixels,
+        depth_tilt=opt.depth_tilt,
+        iterations=opt.fit_iterations,
+        rng=np.random.default_rng(seed),
+    )
+    spread = np.array(
+        [np.sqrt(np.mean(np.sum((i.p - i.p.mean(0)) ** 2, axis=1))) for i in support]
+    )
+    good = (
+        fits.ok
+        & (fits.quality >= opt.min_fit_quality)
+        & np.isfinite(fits.var_log_focal)
+        & (spread >= opt.min_nocs_spread)
+    )
     for k, inst in enumerate(support):
         if not fits.ok[k] or not np.isfinite(fits.var_log_focal[k]):
             est.rejected[inst.instance_id] = "degenerate fit"
-        elif spread[k] < opt["min_nocs_spread"]:
-            est.rejected[inst.instance_id] = (f"its NOCS span {spread[k]:.3f} (< {opt['min_nocs_spread']}): "
-                                              "too small a piece of the category's shape")
-        elif fits.quality[k] < opt["min_fit_quality"]:
-            est.rejected[inst.instance_id] = (f"its NOCS explain {fits.quality[k]:.0%} of its shape "
-                                              f"(< {opt['min_fit_quality']:.0%}): not the predicted category")
-    est.mirrored = [inst.instance_id for k, inst in enumerate(support) if good[k] and fits.mirrored[k]]
+        elif spread[k] < opt.min_nocs_spread:
+            est.rejected[inst.instance_id] = (
+                f"its NOCS span {spread[k]:.3f} (< {opt.min_nocs_spread}): "
+                "too small a piece of the category's shape"
+            )
+        elif fits.quality[k] < opt.min_fit_quality:
+            est.rejected[inst.instance_id] = (
+                f"its NOCS explain {fits.quality[k]:.0%} of its shape "
+                f"(< {opt.min_fit_quality:.0%}): not the predicted category"
+            )
+    est.mirrored = [
+        inst.instance_id for k, inst in enumerate(support) if good[k] and fits.mirrored[k]
+    ]
     if not good.any():
         est.reason = "no object whose NOCS explain its shape: " + "; ".join(
-            f"{i}: {why}" for i, why in est.rejected.items())
+            f"{i}: {why}" for i, why in est.rejected.items()
+        )
         return est
     # A smooth relative depth error e over an object changes its relief by about e * z, so its
     # focal length by e * z / relief: far, flat objects say little. The fit removes the error's
     # gradient over each object; what it cannot see (the field's curvature) is taken to be as
     # large as the gradients it found, pooled over the frame's objects.
-    e = opt["unseen_depth_error"] * np.sqrt(np.mean(fits.tilt[good] ** 2))
+    e = opt.unseen_depth_error * np.sqrt(np.mean(fits.tilt[good] ** 2))
     var = fits.var_log_focal + (e * fits.translation[:, 2] / np.maximum(fits.relief, 1e-9)) ** 2
     # A NOCS map that is not this object's shape (the category prior's) errs in f about as much
     # as it misfits the shape; a perfect map leaves only noise in the unexplained share.
-    var = var + opt["shape_error"] ** 2 * (1.0 - np.minimum(fits.quality, 1.0))
-    comb = random_effects(np.log(fits.focal[good]), var[good], opt["object_tau"], opt["object_tau_weight"])
+    var = var + opt.shape_error**2 * (1.0 - np.minimum(fits.quality, 1.0))
+    comb = random_effects(
+        np.log(fits.focal[good]), var[good], opt.object_tau, opt.object_tau_weight
+    )
     if comb is None:
         est.reason = "no finite per-object estimate"
         return est
@@ -314,21 +342,34 @@ def estimate_focal(depth, nocs, mask, principal_point=None, **options) -> FocalE
             est.rejected[inst.instance_id] = "its focal length disagrees with the other objects"
     # Poses only for objects whose own focal length is informative: a flat spurious blob or a
     # far, shallow object fits a similarity of almost any shape.
-    used = [inst for inst, u in zip(kept, comb.used)
-            if u and est.object_focals[inst.instance_id][1] <= opt["pose_max_std"]]
+    used = [
+        inst
+        for inst, u in zip(kept, comb.used)
+        if u and est.object_focals[inst.instance_id][1] <= opt.pose_max_std
+    ]
     # Of the combination's variance sum(w^2 (v + tau^2)) / sum(w)^2, the fits' curvature is noise.
     w = 1.0 / (var[good][comb.used] + comb.tau2)
-    est.std_rel_noise = float(np.sqrt(np.sum(w * w * fits.var_log_focal[good][comb.used])) / w.sum())
-    return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var)), used, opt, rng)
+    est.std_rel_noise = float(
+        np.sqrt(np.sum(w * w * fits.var_log_focal[good][comb.used])) / w.sum()
+    )
+    return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var)), used, opt, rng, poses)
 
 
-def _finish(est: FocalEstimate, focal: float, std_rel, instances, opt: dict, rng) -> FocalEstimate:
+def _finish(
+    est: FocalEstimate,
+    focal: float,
+    std_rel,
+    instances,
+    opt: EstimatorOptions,
+    rng,
+    poses: bool = False,
+) -> FocalEstimate:
     """Enforce the focal range, then attach the poses of the objects that made the estimate."""
-    lo, hi = opt["focal_range"]
+    lo, hi = opt.focal_range
     if not lo <= focal <= hi:
         est.reason = f"focal {focal:.1f} px outside focal_range [{lo:g}, {hi:g}]"
         return est
     est.focal, est.std_rel, est.instances = focal, std_rel, list(instances)
-    if opt["poses"]:
+    if poses:
         est.objects = estimate_poses(est.instances, focal, exclude=est.mirrored, rng=rng)
     return est

@@ -18,12 +18,14 @@ A frame without ``std_rel_noise`` counts as all noise.
 Frames further than ``reject_sigma`` robust standard deviations of the frames' own spread (at
 least their noise) from the median are left out: a frame whose objects were all wrong.
 
-A zoom is a change point: for every split of the window into older and newer frames (at least
-``change_frames`` newer), the difference of the two medians is compared with its standard error
-from the transient spread (persistent error cancels in the difference). When the largest
-difference exceeds both ``change_sigma`` standard errors and ``change_threshold`` (relative),
-the older frames are dropped. A change of image size starts a new window.
+A zoom is a change point: at the likeliest split of the window into older and newer frames (at
+least ``change_frames`` on each side), the difference of the two medians is compared with its
+standard error from the frames' spread about the two medians, widened for slow drift (persistent
+error cancels in the difference). When it exceeds both ``change_sigma`` standard errors and
+``change_threshold`` (relative), the older frames are dropped. A change of image size starts a
+new window. The settings are a :class:`WindowOptions`.
 """
+
 from __future__ import annotations
 
 from collections import deque
@@ -32,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .estimator import FocalEstimate
+from .options import WindowOptions
 from .robust import MAD_TO_SIGMA
 
 
@@ -66,33 +69,11 @@ class _Frame:
 
 
 class FocalWindow:
-    """Accumulates :class:`FocalEstimate` s of successive frames into a stable focal length.
+    """Accumulates :class:`FocalEstimate` s of successive frames into a stable focal length,
+    as its :class:`WindowOptions` say (default: fcop_ros's settings)."""
 
-    Args:
-        max_frames: frames kept (the window length); max_age: seconds kept (None: no limit).
-        min_frames, min_support: evidence needed before a focal is reported (frames with a
-            focal; agreeing triplet votes over the window).
-        change_threshold (relative), change_sigma and change_frames: zoom detection, see the
-            module docstring.
-        reject_sigma: frames further than this many standard deviations from the others are
-            left out of the estimate (a frame whose objects were all wrong).
-    """
-
-    def __init__(self, max_frames: int = 30, max_age: float | None = None, min_frames: int = 1,
-                 min_support: int = 30, change_threshold: float = 0.08, change_sigma: float = 6.0,
-                 change_frames: int = 3, reject_sigma: float = 4.0):
-        if max_frames < 1:
-            raise ValueError("max_frames must be >= 1")
-        if max_age is not None and not max_age > 0:
-            raise ValueError("max_age must be > 0 seconds or None")
-        if change_frames < 1:
-            raise ValueError("change_frames must be >= 1")
-        if not change_threshold > 0 or not change_sigma > 0 or not reject_sigma > 0:
-            raise ValueError("change_threshold, change_sigma and reject_sigma must be > 0")
-        self.max_frames, self.max_age = int(max_frames), max_age
-        self.min_frames, self.min_support = int(min_frames), int(min_support)
-        self.change_threshold, self.change_sigma = float(change_threshold), float(change_sigma)
-        self.change_frames, self.reject_sigma = int(change_frames), float(reject_sigma)
+    def __init__(self, options: WindowOptions | None = None):
+        self.options = WindowOptions() if options is None else options
         self._frames: deque[_Frame] = deque()
         self.current = WindowEstimate(None, reason="no frames yet")
         self.changes = 0
@@ -106,21 +87,31 @@ class FocalWindow:
         self.current = WindowEstimate(None, reason="window reset")
 
     def add(self, estimate: FocalEstimate, stamp: float) -> WindowEstimate:
-        """Add one frame's estimate taken at ``stamp`` (seconds) and return the new window estimate."""
+        """Add one frame's estimate taken at ``stamp`` (seconds); return the window's estimate."""
         size = tuple(estimate.image_size) if estimate.image_size else None
-        new_size = bool(self._frames) and size is not None and self._frames[-1].size not in (None, size)
+        new_size = (
+            bool(self._frames) and size is not None and self._frames[-1].size not in (None, size)
+        )
         if new_size:
             self._frames.clear()
         ok = estimate.focal is not None and estimate.std_rel is not None and estimate.std_rel > 0
         var = float(estimate.std_rel) ** 2 if ok else np.inf
         noise = getattr(estimate, "std_rel_noise", None)
         noise = min(float(noise) ** 2, var) if ok and noise is not None and noise > 0 else var
-        self._frames.append(_Frame(float(stamp), float(np.log(estimate.focal)) if ok else None,
-                                   var, noise, int(estimate.inlier_count), size))
-        while len(self._frames) > self.max_frames:
+        self._frames.append(
+            _Frame(
+                float(stamp),
+                float(np.log(estimate.focal)) if ok else None,
+                var,
+                noise,
+                int(estimate.inlier_count),
+                size,
+            )
+        )
+        while len(self._frames) > self.options.max_frames:
             self._frames.popleft()
-        if self.max_age is not None:
-            while self._frames and stamp - self._frames[0].stamp > self.max_age:
+        if self.options.max_age is not None:
+            while self._frames and stamp - self._frames[0].stamp > self.options.max_age:
                 self._frames.popleft()
         changed = self._detect_change() or new_size
         self.current = self._estimate()
@@ -129,13 +120,17 @@ class FocalWindow:
 
     def _rated(self):
         rated = [f for f in self._frames if f.logf is not None]
-        return (rated, np.array([f.logf for f in rated]), np.array([f.var for f in rated]),
-                np.array([f.noise for f in rated]))
+        return (
+            rated,
+            np.array([f.logf for f in rated]),
+            np.array([f.var for f in rated]),
+            np.array([f.noise for f in rated]),
+        )
 
     def _detect_change(self) -> bool:
         """True (and the older frames dropped) when the newer frames moved away from the older."""
         rated, y, _, _ = self._rated()
-        k = self.change_frames
+        k = self.options.change_frames
         n = y.size
         if n < 2 * k:
             return False
@@ -153,12 +148,18 @@ class FocalWindow:
         # autocorrelation of those residuals). The medians' standard errors are sqrt(pi / 2)
         # times those of means.
         r = y - np.where(np.arange(n) < c, old[best], new[best])
-        t = max((MAD_TO_SIGMA * np.median(np.abs(np.diff(y)))) ** 2 / 2.0,
-                (MAD_TO_SIGMA * np.median(np.abs(r))) ** 2, 1e-6)
+        t = max(
+            (MAD_TO_SIGMA * np.median(np.abs(np.diff(y)))) ** 2 / 2.0,
+            (MAD_TO_SIGMA * np.median(np.abs(r))) ** 2,
+            1e-6,
+        )
         rho = _lag_one(r) if n > 3 else 0.0
         t *= (1.0 + rho) / (1.0 - rho)
         z = abs(diff[best]) / np.sqrt(np.pi / 2 * (t / c + t / (n - c)))
-        if not (z > self.change_sigma and abs(diff[best]) > np.log1p(self.change_threshold)):
+        if not (
+            z > self.options.change_sigma
+            and abs(diff[best]) > np.log1p(self.options.change_threshold)
+        ):
             return False
         first = rated[c]
         while self._frames[0] is not first:
@@ -171,16 +172,26 @@ class FocalWindow:
         rated, y, v, noise = self._rated()
         n_all = len(frames)
         support = int(sum(f.support for f in rated))
-        if y.size < self.min_frames:
-            return WindowEstimate(None, frames=n_all, support=support,
-                                  reason=f"{y.size} of {self.min_frames} frames with focal evidence")
-        if support < self.min_support:
-            return WindowEstimate(None, frames=n_all, support=support,
-                                  reason=f"too little evidence: {support} agreeing votes")
+        if y.size < self.options.min_frames:
+            return WindowEstimate(
+                None,
+                frames=n_all,
+                support=support,
+                reason=f"{y.size} of {self.options.min_frames} frames with focal evidence",
+            )
+        if support < self.options.min_window_votes:
+            return WindowEstimate(
+                None,
+                frames=n_all,
+                support=support,
+                reason=f"too little evidence: {support} agreeing votes",
+            )
         if y.size >= 3:
             med = np.median(y)
-            spread = max(MAD_TO_SIGMA * np.median(np.abs(y - med)), float(np.sqrt(np.median(noise))))
-            keep = np.abs(y - med) <= self.reject_sigma * spread
+            spread = max(
+                MAD_TO_SIGMA * np.median(np.abs(y - med)), float(np.sqrt(np.median(noise)))
+            )
+            keep = np.abs(y - med) <= self.options.reject_sigma * spread
             y, v, noise = y[keep], v[keep], noise[keep]
         w = 1.0 / v
         mean = float(np.sum(w * y) / w.sum())

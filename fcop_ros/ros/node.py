@@ -12,7 +12,6 @@ publishing never waits for the estimator, and the estimator never works on a bac
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import os
 import sys
 import threading
@@ -59,6 +58,7 @@ from ..core.camera import image_centre
 from .calibration import default_calibration_path, write_calibration
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
 from .params import (
+    ESTIMATOR_PARAMETERS,
     PARAMETERS,
     SYNC_PARAMETERS,
     WINDOW_PARAMETERS,
@@ -67,13 +67,14 @@ from .params import (
     check_combination,
     check_words,
     descriptor,
+    estimator_options,
+    window_options,
 )
 from .sync import StampSynchronizer
 from .throttle import LogThrottle
 from .worker import LatestSlotWorker
 
 INPUTS = ("depth", "nocs", "mask")
-_WINDOW_OPTIONS = frozenset(inspect.signature(FocalWindow).parameters)
 
 
 @dataclass(frozen=True)
@@ -182,6 +183,7 @@ class FcopNode(Node):
         self._warned_distortion = False
         self._rng = np.random.default_rng(None if self.p["seed"] < 0 else int(self.p["seed"]))
         self.sync = self._new_sync()
+        self.estimator_options = estimator_options(self.p)
         self._build_window(keep=False)
 
         qos_in = QoSOverridingOptions.with_default_policies()
@@ -287,7 +289,9 @@ class FcopNode(Node):
                     new["queue_size"],
                     new["sync_slop"] if new["sync_mode"] == "approximate" else 0.0,
                 )
-            if changed & set(WINDOW_PARAMETERS):
+            if changed & ESTIMATOR_PARAMETERS:
+                self.estimator_options = estimator_options(new)
+            if changed & WINDOW_PARAMETERS:
                 self._build_window(keep=True)
             elif changed & {"max_uncertainty"}:
                 self._update_estimate_locked(self.window.current)
@@ -306,17 +310,7 @@ class FcopNode(Node):
         """A window with the current settings; with ``keep``, the old window's frames re-evaluated
         in it."""
         frames = list(self._history) if keep else []
-        options = dict(
-            max_frames=self.p["window_frames"],
-            max_age=self.p["window_seconds"] or None,
-            noise_bound=self.p["noise_bound"],
-            bound_mode=self.p["noise_bound_mode"],
-            min_frames=self.p["min_frames"],
-            min_support=self.p["min_support"],
-        )
-        # The window of the core rewrite weighs frames by their std_rel and takes no noise bound;
-        # pass what this FocalWindow accepts (the bound still shapes each frame's estimate).
-        self.window = FocalWindow(**{k: v for k, v in options.items() if k in _WINDOW_OPTIONS})
+        self.window = FocalWindow(window_options(self.p))
         self._history = deque()
         for est, t in frames:
             self._add_to_window(est, t)
@@ -611,11 +605,7 @@ class FcopNode(Node):
             nocs,
             mask,
             (cx, cy),
-            triplets_per_object=p["triplets_per_object"],
-            noise_bound=p["noise_bound"],
-            bound_mode=p["noise_bound_mode"],
-            focal_range=(p["focal_min"], p["focal_max"]),
-            min_object_pixels=p["min_object_pixels"],
+            options=self.estimator_options,
             poses=False,
             seed=int(self._rng.integers(2**31)),
         )

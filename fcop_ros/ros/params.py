@@ -14,7 +14,11 @@ from dataclasses import dataclass
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
+from ..core.options import BOUND_MODES, EstimatorOptions, NoiseBound, WindowOptions
+
 NOCS_CONVENTIONS = ("fcop", "nocs_dataset")
+# The estimator's and the window's defaults, written once (in fcop_ros/core/options.py).
+_EST, _WIN = EstimatorOptions(), WindowOptions()
 _NAME = re.compile(r"[A-Za-z0-9_-]+")
 
 
@@ -39,7 +43,7 @@ class ParamSpec:
 
 PARAMETERS: dict[str, ParamSpec] = {
     "window_frames": ParamSpec(
-        30, "Frames in the sliding window of focal evidence.", range=(1, 1000)
+        _WIN.max_frames, "Frames in the sliding window of focal evidence.", range=(1, 1000)
     ),
     "window_seconds": ParamSpec(
         0.0,
@@ -47,22 +51,30 @@ PARAMETERS: dict[str, ParamSpec] = {
         range=(0.0, 3600.0),
     ),
     "triplets_per_object": ParamSpec(
-        1500, "Random triplets drawn on each object per frame.", range=(10, 100000)
+        _EST.triplets_per_object,
+        "Random triplets drawn on each object per frame.",
+        range=(10, 100000),
     ),
     "noise_bound": ParamSpec(
-        0.05,
+        _EST.noise_bound.value,
         "Stabbing half-width: a fraction of f (relative mode) or pixels (absolute).",
         range=(1e-4, 1000.0),
     ),
     "noise_bound_mode": ParamSpec(
-        "relative",
+        _EST.noise_bound.mode,
         "'relative' (log f, same meaning at every focal) or 'absolute' (pixels).",
-        choices=("relative", "absolute"),
+        choices=BOUND_MODES,
     ),
-    "focal_min": ParamSpec(50.0, "Smallest focal length considered, pixels.", range=(1.0, 1e6)),
-    "focal_max": ParamSpec(20000.0, "Largest focal length considered, pixels.", range=(1.0, 1e6)),
+    "focal_min": ParamSpec(
+        _EST.focal_range[0], "Smallest focal length considered, pixels.", range=(1.0, 1e6)
+    ),
+    "focal_max": ParamSpec(
+        _EST.focal_range[1], "Largest focal length considered, pixels.", range=(1.0, 1e6)
+    ),
     "min_object_pixels": ParamSpec(
-        50, "Instances with fewer usable pixels are ignored.", range=(3, 10000000)
+        _EST.min_object_pixels,
+        "Instances with fewer usable pixels are ignored.",
+        range=(3, 10000000),
     ),
     "depth_scale": ParamSpec(
         0.001,
@@ -97,11 +109,14 @@ PARAMETERS: dict[str, ParamSpec] = {
     "publish_poses": ParamSpec(True, "Publish object_poses (geometry_msgs/PoseArray)."),
     "publish_markers": ParamSpec(True, "Publish object_markers (visualization_msgs/MarkerArray)."),
     "min_frames": ParamSpec(
-        1, "Frames the window needs before it reports a focal length.", range=(1, 1000)
+        _WIN.min_frames,
+        "Frames the window needs before it reports a focal length.",
+        range=(1, 1000),
     ),
-    "min_support": ParamSpec(
-        30,
-        "Agreeing triplet votes the window needs before it reports a focal length.",
+    "min_window_votes": ParamSpec(
+        _WIN.min_window_votes,
+        "Agreeing triplet votes, summed over the window's frames, the window needs before it "
+        "reports a focal length.",
         range=(1, 10000000),
     ),
     "max_uncertainty": ParamSpec(
@@ -152,14 +167,40 @@ PARAMETERS: dict[str, ParamSpec] = {
 # Set once at start-up: refused at run time (the descriptor says read_only).
 READ_ONLY = frozenset(name for name, spec in PARAMETERS.items() if spec.read_only)
 SYNC_PARAMETERS = frozenset({"sync_mode", "sync_slop", "queue_size"})
-WINDOW_PARAMETERS = (
-    "window_frames",
-    "window_seconds",
-    "noise_bound",
-    "noise_bound_mode",
-    "min_frames",
-    "min_support",
+WINDOW_PARAMETERS = frozenset(
+    {"window_frames", "window_seconds", "min_frames", "min_window_votes"}
 )
+ESTIMATOR_PARAMETERS = frozenset(
+    {
+        "triplets_per_object",
+        "noise_bound",
+        "noise_bound_mode",
+        "focal_min",
+        "focal_max",
+        "min_object_pixels",
+    }
+)
+
+
+def estimator_options(p: dict) -> EstimatorOptions:
+    """The estimator's settings from a complete set of parameter values."""
+    return EstimatorOptions(
+        triplets_per_object=p["triplets_per_object"],
+        noise_bound=NoiseBound(p["noise_bound"], p["noise_bound_mode"]),
+        focal_range=(p["focal_min"], p["focal_max"]),
+        min_object_pixels=p["min_object_pixels"],
+    )
+
+
+def window_options(p: dict) -> WindowOptions:
+    """The window's settings from a complete set of parameter values (window_seconds 0: no age
+    limit)."""
+    return WindowOptions(
+        max_frames=p["window_frames"],
+        max_age=p["window_seconds"] or None,
+        min_frames=p["min_frames"],
+        min_window_votes=p["min_window_votes"],
+    )
 
 
 def defaults() -> dict:

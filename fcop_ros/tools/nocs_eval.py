@@ -127,9 +127,10 @@ def write_frame(prefix: Path, depth: np.ndarray, nocs: np.ndarray, mask: np.ndar
     Path(str(prefix) + "_meta.txt").write_text("\n".join(lines) + "\n")
 
 
-def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None, use_principal_point=True,
-             progress=None, **options):
-    """Estimate every frame; return (rows, per-scene medians) and write the per-frame CSV."""
+def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None,
+             use_principal_point=True, progress=None, options=None):
+    """Estimate every frame (with ``options``, an EstimatorOptions; default fcop_ros's); return
+    (rows, per-scene medians) and write the per-frame CSV."""
     from ..core import estimate_focal
 
     root = Path(root)
@@ -144,7 +145,7 @@ def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None, use_
     for n, prefix in enumerate(frames):
         depth, nocs, mask = load_frame(prefix, root, depth_dir, nocs_dir)
         pp = (cx, cy) if use_principal_point else None
-        est = estimate_focal(depth, nocs, mask, pp, seed=n, **options)
+        est = estimate_focal(depth, nocs, mask, pp, options=options, seed=n)
         rel = prefix.relative_to(root)
         scene = str(rel.parent) if str(rel.parent) != "." else root.name
         err = None if est.focal is None else 100.0 * (est.focal / f_true - 1.0)

@@ -1,0 +1,172 @@
+"""The estimator's and the window's settings as typed, frozen objects.
+
+The node builds them once from its parameters (``fcop_ros/ros/params.py`` takes the defaults
+of its option-backed parameters from here) and hands them to :func:`estimate_focal` and
+:class:`FocalWindow`; tools and tests build them the same way. Each validates itself on
+construction, so a wrong value fails where it is set, not deep in a frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .stabbing import focal_intervals
+
+BOUND_MODES = ("relative", "absolute")
+METHODS = ("stabbing", "ransac")
+
+
+@dataclass(frozen=True)
+class NoiseBound:
+    """Half-width of every focal vote's interval in the stabbing: a fraction of f in log f
+    ("relative", the same meaning at every focal length) or pixels ("absolute", the paper's)."""
+
+    value: float = 0.05
+    mode: str = "relative"
+
+    def __post_init__(self):
+        if self.mode not in BOUND_MODES:
+            raise ValueError(f"noise bound mode must be one of {BOUND_MODES}, got {self.mode!r}")
+        if not self.value > 0 or (self.mode == "relative" and not self.value <= 0.5):
+            raise ValueError(
+                f"noise bound must be > 0 (a fraction <= 0.5 when relative), got {self.value}"
+            )
+
+    @property
+    def equal_widths(self) -> bool:
+        """True when every interval has one width (in log f): one sort of centres suffices."""
+        return self.mode == "relative"
+
+    @property
+    def log_half_width(self) -> float:
+        """The intervals' half-width in log f (relative mode only)."""
+        return float(np.log1p(self.value))
+
+    def intervals(self, votes: np.ndarray):
+        """(lo, hi, back): each vote's interval in the stabbing's coordinate and the map back to
+        pixels (see :func:`fcop_ros.core.stabbing.focal_intervals`)."""
+        return focal_intervals(votes, self.value, self.mode)
+
+
+@dataclass(frozen=True)
+class EstimatorOptions:
+    """How :func:`estimate_focal` turns one frame into a focal length (defaults: fcop_ros's).
+
+    Votes: ``triplets_per_object`` random triplets on each object, each interval
+    ``noise_bound`` wide; votes outside ``focal_range`` (px) are discarded and no focal outside it
+    is reported. ``min_frame_votes`` agreeing votes (and ``min_inlier_ratio`` of them) are needed
+    before a frame reports a focal length.
+
+    Correspondences: instances with fewer than ``min_object_pixels`` usable pixels are ignored,
+    only the ``max_instances`` largest are used; masks are eroded by ``erode_px``, correspondences
+    averaged over ``denoise_radius``, pixels beyond ``outlier_sigma`` robust sigmas of their
+    neighbourhood and depth edges beyond ``edge_sigma`` dropped (0: off), ``max_pixels`` kept per
+    object.
+
+    Per-object fit (``refine``): ``fit_pixels`` pixels, ``fit_iterations`` Gauss-Newton steps,
+    each object's depth-error gradient fitted as a nuisance (``depth_tilt``). Objects whose NOCS
+    explain less than ``min_fit_quality`` of their shape, or span less than ``min_nocs_spread``,
+    are refused. The systematic error terms: ``unseen_depth_error`` (depth error the fit cannot
+    see, relative to the gradients it found), ``shape_error`` (per object, times the square root
+    of its unexplained shape share), and a prior between-object spread ``object_tau`` worth
+    ``object_tau_weight`` objects. No pose for an object whose own std_rel exceeds
+    ``pose_max_std``.
+
+    ``method``: "stabbing" (the paper's fCOP-IS) or "ransac" (fCOP-RANSAC, ``ransac_hypotheses``
+    hypotheses, inlier threshold ``ransac_threshold`` metres).
+    """
+
+    triplets_per_object: int = 1500
+    noise_bound: NoiseBound = field(default_factory=NoiseBound)
+    focal_range: tuple[float, float] = (50.0, 20000.0)
+    min_frame_votes: int = 30
+    min_inlier_ratio: float = 0.05
+    min_object_pixels: int = 50
+    max_instances: int = 64
+    erode_px: int = 1
+    denoise_radius: int = 2
+    outlier_sigma: float = 4.0
+    edge_sigma: float = 2.0
+    max_pixels: int = 2000
+    refine: bool = True
+    fit_pixels: int = 300
+    fit_iterations: int = 10
+    depth_tilt: bool = True
+    min_fit_quality: float = 0.85
+    min_nocs_spread: float = 0.1
+    unseen_depth_error: float = 0.3
+    shape_error: float = 0.1
+    object_tau: float = 0.005
+    object_tau_weight: float = 2.0
+    pose_max_std: float = 0.25
+    method: str = "stabbing"
+    ransac_hypotheses: int = 400
+    ransac_threshold: float = 0.005
+
+    def __post_init__(self):
+        lo, hi = self.focal_range
+        if not 0 < lo < hi:
+            raise ValueError(f"focal_range must satisfy 0 < min < max, got {self.focal_range}")
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
+        if not isinstance(self.noise_bound, NoiseBound):
+            raise TypeError("noise_bound must be a NoiseBound")
+        for name in (
+            "triplets_per_object",
+            "min_object_pixels",
+            "max_instances",
+            "max_pixels",
+            "fit_pixels",
+            "fit_iterations",
+            "ransac_hypotheses",
+        ):
+            if not getattr(self, name) >= 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class WindowOptions:
+    """How :class:`FocalWindow` combines frames (see :mod:`fcop_ros.core.window`).
+
+    ``max_frames`` frames are kept, none older than ``max_age`` seconds (None: no limit); a focal
+    is reported once ``min_frames`` frames had one and ``min_window_votes`` agreeing votes were
+    seen over the window. Zoom detection: ``change_threshold`` (relative), ``change_sigma`` and
+    ``change_frames``; frames beyond ``reject_sigma`` robust sigmas are left out.
+    """
+
+    max_frames: int = 30
+    max_age: float | None = None
+    min_frames: int = 1
+    min_window_votes: int = 30
+    change_threshold: float = 0.08
+    change_sigma: float = 6.0
+    change_frames: int = 3
+    reject_sigma: float = 4.0
+
+    def __post_init__(self):
+        if self.max_frames < 1:
+            raise ValueError("max_frames must be >= 1")
+        if self.max_age is not None and not self.max_age > 0:
+            raise ValueError("max_age must be > 0 seconds or None")
+        if self.change_frames < 1:
+            raise ValueError("change_frames must be >= 1")
+        if not (self.change_threshold > 0 and self.change_sigma > 0 and self.reject_sigma > 0):
+            raise ValueError("change_threshold, change_sigma and reject_sigma must be > 0")
+
+
+# The paper's fCOP-IS taken literally: uniform triplets on raw pixels, a 5 px bound, the
+# interval midpoint, no refinement and no evidence threshold (it always answers).
+PAPER_FCOP_IS = EstimatorOptions(
+    noise_bound=NoiseBound(5.0, "absolute"),
+    refine=False,
+    denoise_radius=0,
+    erode_px=0,
+    outlier_sigma=0.0,
+    edge_sigma=0.0,
+    min_frame_votes=1,
+    min_inlier_ratio=0.0,
+    min_fit_quality=0.0,
+    min_nocs_spread=0.0,
+)
