@@ -644,8 +644,9 @@ class FcopNode(Node):
                 "new focal window"
             )
         if win.changed:
+            at = "no focal yet" if win.focal is None else f"{win.focal:.1f} px"
             self.get_logger().info(
-                f"fcop_node: focal length changed (zoom?): window restarted at {win.focal}"
+                f"fcop_node: focal length changed (zoom?): window restarted, now at {at}"
             )
         if ready is None:
             return False
