@@ -352,20 +352,12 @@ class FcopNode(Node):
                 "camera_info_size_mismatch",
                 f"camera_info_in is {cam.width}x{cam.height}, the images are {w}x{h}",
             )
+        # Per axis: the parameter if set, else camera_info_in's K if it has one, else the centre.
         use_cam = cam is not None and (cam.k[2] != 0 or cam.k[5] != 0)
-        cx = (
-            p["principal_point_x"]
-            if p["principal_point_x"] >= 0
-            else cam.k[2]
-            if use_cam
-            else image_centre(w, h)[0]
-        )
-        cy = (
-            p["principal_point_y"]
-            if p["principal_point_y"] >= 0
-            else cam.k[5]
-            if use_cam
-            else image_centre(w, h)[1]
+        fallback = (cam.k[2], cam.k[5]) if use_cam else image_centre(w, h)
+        cx, cy = (
+            p[name] if p[name] >= 0 else default
+            for name, default in zip(("principal_point_x", "principal_point_y"), fallback)
         )
         if not (0 <= cx <= w - 1 and 0 <= cy <= h - 1):
             raise _Reject(
