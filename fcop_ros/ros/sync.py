@@ -73,11 +73,11 @@ class StampSynchronizer:
         confirm: messages in a row on one input that make a jump real.
     """
 
-    def __init__(self, n_inputs: int, queue_size: int = 10, slop: float = 0.0, reset_after: float = 1.0,
-                 confirm: int = 3):
+    def __init__(self, n_inputs: int, queue_size: int = 10, slop: float = 0.0,
+                 reset_after: float = 1.0, confirm: int = 3):
         if n_inputs < 1 or queue_size < 1 or slop < 0 or reset_after <= 0 or confirm < 1:
-            raise ValueError("StampSynchronizer: need n_inputs >= 1, queue_size >= 1, slop >= 0, reset_after > 0, "
-                             "confirm >= 1")
+            raise ValueError("StampSynchronizer: need n_inputs >= 1, queue_size >= 1, slop >= 0, "
+                             "reset_after > 0, confirm >= 1")
         self.n = int(n_inputs)
         self.queue_size = int(queue_size)
         self.slop_ns = int(round(slop * 1e9))
@@ -89,13 +89,14 @@ class StampSynchronizer:
         self._ref: list[int | None] = [None] * self.n          # last accepted stamp per input
         self._steps: list[deque] = [deque(maxlen=9) for _ in range(self.n)]  # recent forward steps
         self._held: list[list] = [[] for _ in range(self.n)]  # a jump waiting for confirmation
-        #: Filled by each :meth:`add`: messages that passed the stamp check, as (input, stamp, msg),
-        #: and outliers dropped, as (input, [stamps], the input's stamp before them).
+        #: Filled by each :meth:`add`: messages that passed the stamp check, as (input, stamp,
+        #: msg), and outliers dropped, as (input, [stamps], the input's stamp before them).
         self.accepted: list[tuple[int, int, object]] = []
         self.outliers_dropped: list[tuple[int, list[int], int | None]] = []
 
     def configure(self, queue_size: int | None = None, slop: float | None = None) -> None:
-        """Change the queue bound and the slop, keeping what is queued (oldest dropped past the bound)."""
+        """Change the queue bound and the slop, keeping what is queued (oldest dropped past the
+        bound)."""
         if queue_size is not None:
             if queue_size < 1:
                 raise ValueError("queue_size must be >= 1")
@@ -162,7 +163,8 @@ class StampSynchronizer:
         stamp = int(stamp_ns)
         self.accepted, self.outliers_dropped = [], []
         fits = self._fits(index, stamp)
-        others = [self._fits(j, stamp) for j in range(self.n) if j != index and self._ref[j] is not None]
+        others = [self._fits(j, stamp) for j in range(self.n)
+                  if j != index and self._ref[j] is not None]
         if fits is None:
             fits = not others or any(others)
         if fits:
@@ -170,7 +172,8 @@ class StampSynchronizer:
             self._note(index, stamp, False)
             return self._accept(index, stamp, msg)
         held = self._held[index]
-        if held and held[-1][0] < stamp <= held[-1][0] + min(self._ahead_ns(index), self.reset_ns * 1000):
+        if held and held[-1][0] < stamp <= held[-1][0] + min(self._ahead_ns(index),
+                                                             self.reset_ns * 1000):
             held.append((stamp, msg))
         else:
             self._drop_held(index)
@@ -195,7 +198,8 @@ class StampSynchronizer:
                 self.reset()
             else:
                 self.stats.drop("late", index)
-                self.accepted.append((index, stamp_ns, msg))  # a good message, only too late to match
+                # a good message, only too late to match
+                self.accepted.append((index, stamp_ns, msg))
                 return []
         q = self._queues[index]
         keys = [s for s, _ in q]
