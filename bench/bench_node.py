@@ -18,14 +18,20 @@ Memory: resident set size (VmRSS) every --mem-every frames of the paced run, wit
 least-squares line through the samples of the second half (flat means no growth per frame). The
 benchmark's own records are arrays allocated before the run, so they add nothing while it runs.
 --cores 1 pins the process to one core (the executor thread and the estimator thread).
+--listener process (default) also records, in a second process pinned to the same core, when
+the CameraInfo and the depth image arrive there: what a consumer of camera_info sees, without
+the benchmark's own executor (which publishes the images and serves the in-process subscribers)
+in the way. Both processes then use the shipped Fast DDS profile (shared memory).
 --profile prints where the executor thread (the input side and the CameraInfo path) spends
-its time.
+its time; --switch-interval changes how soon a thread waiting for the GIL gets it from the busy
+estimator thread (a diagnostic: the node leaves the interpreter's setting alone).
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
 import os
+import sys
 import time
 
 import numpy as np
@@ -81,6 +87,39 @@ def ms_stats(values_s: np.ndarray) -> str:
     return f"median {np.median(v):.2f} ms, p95 {np.percentile(v, 95):.2f} ms (n={len(v)})"
 
 
+def listen(out: str, total: int) -> None:
+    """The other process of --listener process: record when each CameraInfo and each depth image
+    arrives (perf_counter, the system-wide monotonic clock) until stdin closes; save to
+    ``out``."""
+    import threading
+
+    from rclpy.node import Node
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from msg_adapters import stamp_ns
+    info, depth = np.full(total, np.nan), np.full(total, np.nan)
+
+    def record(arr):
+        def cb(msg) -> None:
+            k = (stamp_ns(msg) - 10**18) // 10**7
+            if 0 <= k < total and np.isnan(arr[k]):
+                arr[k] = time.perf_counter()
+        return cb
+
+    done = threading.Event()
+    threading.Thread(target=lambda: (sys.stdin.read(), done.set()), daemon=True).start()
+    with ros_context() as (ctx, ex):
+        node = Node("bench_listener", context=ctx)
+        node.create_subscription(CameraInfo, "camera_info", record(info), 100)
+        node.create_subscription(Image, "depth", record(depth), qos_profile_sensor_data)
+        ex.add_node(node)
+        while not done.is_set():
+            ex.spin_once(timeout_sec=0.05)
+        np.savez(out, info=info, depth=depth)
+        node.destroy_node()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -94,11 +133,34 @@ def main() -> None:
                     help="extra time per frame estimate (ms)")
     ap.add_argument("--profile", action="store_true",
                     help="profile the executor thread over the paced run (cProfile)")
+    ap.add_argument("--switch-interval", type=float, default=0.0,
+                    help="sys.setswitchinterval for the run, seconds (0: Python's 0.005)")
+    ap.add_argument("--listener", choices=("process", "none"), default="process",
+                    help="also receive CameraInfo and depth in a second process (pinned to the "
+                         "same core)")
+    ap.add_argument("--listen", metavar="OUT", help=argparse.SUPPRESS)  # the second process
     args = ap.parse_args()
+    if args.switch_interval > 0:
+        sys.setswitchinterval(args.switch_interval)
     if args.cores:
         os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[: args.cores]))
     from fcop_ros.ros.dds import keep_on_this_machine
     keep_on_this_machine()
+    if args.listener == "process" or args.listen:
+        from fcop_ros.ros.dds import use_large_image_profile
+        use_large_image_profile()  # 640x480 images across processes: shared memory
+    total = args.frames + 10 + args.closed_loop_frames
+    if args.listen:
+        listen(args.listen, total)
+        return
+    listener = None
+    if args.listener == "process":
+        import subprocess
+        import tempfile
+        listen_out = os.path.join(tempfile.mkdtemp(prefix="bench_node_"), "listener.npz")
+        listener = subprocess.Popen(
+            [sys.executable, os.path.abspath(__file__), *sys.argv[1:], "--listen", listen_out],
+            stdin=subprocess.PIPE)
     from geometry_msgs.msg import PoseArray
     from rclpy.node import Node
     from rclpy.qos import qos_profile_sensor_data
@@ -130,10 +192,10 @@ def main() -> None:
     print(
         f"machine: {os.cpu_count()} cores, pinned to {len(os.sched_getaffinity(0))}; "
         f"{args.frames} frames 640x480 at {args.rate:g} Hz, 5 objects, preset moderate, "
-        f"estimator slowed by {args.slow_ms:g} ms; load average "
+        f"estimator slowed by {args.slow_ms:g} ms; GIL switch interval "
+        f"{sys.getswitchinterval() * 1000:g} ms; load average "
         f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}"
     )
-    total = args.frames + 10 + args.closed_loop_frames
     # Per frame index k (stamp 1e18 + k * 1e7 ns): times in perf_counter seconds, NaN until set.
     sent, node_got, info_pubd, info_got, depth_got, posed = (
         np.full(total, np.nan) for _ in range(6))
@@ -184,7 +246,14 @@ def main() -> None:
         tester.create_subscription(Image, "depth", first(depth_got), qos_profile_sensor_data)
         ex.add_node(node)
         ex.add_node(tester)
-        spin_until(ex, lambda: all(p.get_subscription_count() >= 1 for p in pubs), 10)
+        others = 1 if listener is not None else 0
+        spin_until(
+            ex,
+            lambda: all(p.get_subscription_count() >= 1 for p in pubs)
+            and pubs[0].get_subscription_count() >= 2 + others
+            and node.pub_info.get_subscription_count() >= 1 + others,
+            30,
+        )
 
         def publish(k: int) -> None:
             stamp = 10**18 + k * 10**7
@@ -234,6 +303,13 @@ def main() -> None:
             pstats.Stats(prof).sort_stats("tottime").print_stats(15)
         cpu, main_cpu = time.process_time() - cpu0, time.thread_time() - main0
         tester.destroy_timer(timer)
+        if listener is not None:
+            # Let the last messages reach the other process, then collect its records.
+            spin_until(ex, lambda: False, 1.0)
+            listener.stdin.close()
+            listener.wait(timeout=60)
+            rec = np.load(listen_out)
+            far_info, far_depth = rec["info"], rec["depth"]
         n = args.frames
         answered = int(np.count_nonzero(~np.isnan(info_got[:n])))
         print(
@@ -253,6 +329,14 @@ def main() -> None:
               f"{ms_stats(depth_got[:n] - sent[:n])}")
         print(f"  reference (DDS alone), depth published -> the node's callback: "
               f"{ms_stats(node_got[:n] - sent[:n])}")
+        if listener is not None:
+            print("  another process on the same core (as a consumer of camera_info would be):")
+            print(f"    latency depth in the node's callback -> CameraInfo received there: "
+                  f"{ms_stats(far_info[:n] - node_got[:n])}")
+            print(f"    latency depth published -> CameraInfo received there: "
+                  f"{ms_stats(far_info[:n] - sent[:n])}")
+            print(f"    reference (DDS alone), depth published -> depth received there: "
+                  f"{ms_stats(far_depth[:n] - sent[:n])}")
         print(f"  latency depth published -> poses of the frame (estimated frames): "
               f"{ms_stats(posed[:n] - sent[:n])}")
         pc, ec = np.array(proc_cpu) * 1000, np.array(est_cpu) * 1000
