@@ -87,6 +87,13 @@ def ms_stats(values_s: np.ndarray) -> str:
     return f"median {np.median(v):.2f} ms, p95 {np.percentile(v, 95):.2f} ms (n={len(v)})"
 
 
+def theil_sen(xy: np.ndarray) -> float:
+    """The median of the slopes between every pair of samples (x, y)."""
+    i, j = np.triu_indices(len(xy), 1)
+    dx = xy[j, 0] - xy[i, 0]
+    return float(np.median((xy[j, 1] - xy[i, 1])[dx > 0] / dx[dx > 0])) if len(i) else np.nan
+
+
 def listen(out: str, total: int) -> None:
     """The other process of --listener process: record when each CameraInfo and each depth image
     arrives (perf_counter, the system-wide monotonic clock) until stdin closes; save to
@@ -365,7 +372,9 @@ def main() -> None:
                       f"frames): {slope:+.3f} MB per 1000 frames "
                       f"({slope * 1024 / 1000:+.2f} kB per frame)")
             full = np.polyfit(mem[:, 0], mem[:, 1], 1)[0] * 1000 if n_mem >= 2 else np.nan
-            print(f"  slope over all samples: {full:+.3f} MB per 1000 frames")
+            print(f"  slope over all samples: {full:+.3f} MB per 1000 frames; Theil-Sen (the "
+                  f"median of the pairwise slopes, unmoved by a transient dip): "
+                  f"{theil_sen(mem) * 1000:+.3f} MB per 1000 frames")
 
         # Closed loop: maximum rate.
         if args.closed_loop_frames:
