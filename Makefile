@@ -31,7 +31,7 @@ test-all:
 bench: $(STAMP)
 	$(VENV)/bin/pip install -q -e '.[$(ROS),test,bench]'
 	$(PY) bench/bench_core.py
-	$(PY) bench/bench_node.py --frames 300 --closed-loop-frames 30
+	$(PY) bench/bench_node.py --frames 10000 --closed-loop-frames 200
 	$(PY) bench/bench_node.py --frames 300 --closed-loop-frames 30 --slow-ms 100
 	$(PY) bench/world_accuracy.py --frames 60 --sequences 8
 	$(PY) bench/world_accuracy.py --frames 60 --sequences 8 --heldout

@@ -18,7 +18,8 @@ def config_path(name: str = "fcop.yaml") -> str:
         from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
         try:
             candidates.append(os.path.join(get_package_share_directory(_PACKAGE), "config", name))
-        except (PackageNotFoundError, LookupError, ValueError, KeyError, OSError):  # OSError: no AMENT_PREFIX_PATH
+        # OSError: no AMENT_PREFIX_PATH
+        except (PackageNotFoundError, LookupError, ValueError, KeyError, OSError):
             pass
     except ImportError:
         pass

@@ -25,8 +25,6 @@ import bisect
 from collections import Counter, deque
 from dataclasses import dataclass, field
 
-import numpy as np
-
 
 @dataclass
 class SyncStats:
@@ -51,6 +49,18 @@ class SyncStats:
             self.per_input[(reason, index)] += n
 
 
+def _median(values) -> float:
+    """``float(np.median(values))`` of a few integers, in plain Python: the node calls this on
+    the executor thread for every message, and numpy's partition releases the GIL, which on a
+    busy estimator thread costs up to a switch interval (5 ms) to take back. Same arithmetic:
+    the middle value, or the float sum of the two middle values halved."""
+    s = sorted(values)
+    n = len(s)
+    if n % 2:
+        return float(s[n // 2])
+    return (float(s[n // 2 - 1]) + float(s[n // 2])) / 2
+
+
 class StampSynchronizer:
     """Match messages of ``n_inputs`` streams by stamp (integer nanoseconds).
 
@@ -63,11 +73,11 @@ class StampSynchronizer:
         confirm: messages in a row on one input that make a jump real.
     """
 
-    def __init__(self, n_inputs: int, queue_size: int = 10, slop: float = 0.0, reset_after: float = 1.0,
-                 confirm: int = 3):
+    def __init__(self, n_inputs: int, queue_size: int = 10, slop: float = 0.0,
+                 reset_after: float = 1.0, confirm: int = 3):
         if n_inputs < 1 or queue_size < 1 or slop < 0 or reset_after <= 0 or confirm < 1:
-            raise ValueError("StampSynchronizer: need n_inputs >= 1, queue_size >= 1, slop >= 0, reset_after > 0, "
-                             "confirm >= 1")
+            raise ValueError("StampSynchronizer: need n_inputs >= 1, queue_size >= 1, slop >= 0, "
+                             "reset_after > 0, confirm >= 1")
         self.n = int(n_inputs)
         self.queue_size = int(queue_size)
         self.slop_ns = int(round(slop * 1e9))
@@ -79,13 +89,14 @@ class StampSynchronizer:
         self._ref: list[int | None] = [None] * self.n          # last accepted stamp per input
         self._steps: list[deque] = [deque(maxlen=9) for _ in range(self.n)]  # recent forward steps
         self._held: list[list] = [[] for _ in range(self.n)]  # a jump waiting for confirmation
-        #: Filled by each :meth:`add`: messages that passed the stamp check, as (input, stamp, msg),
-        #: and outliers dropped, as (input, [stamps], the input's stamp before them).
+        #: Filled by each :meth:`add`: messages that passed the stamp check, as (input, stamp,
+        #: msg), and outliers dropped, as (input, [stamps], the input's stamp before them).
         self.accepted: list[tuple[int, int, object]] = []
         self.outliers_dropped: list[tuple[int, list[int], int | None]] = []
 
     def configure(self, queue_size: int | None = None, slop: float | None = None) -> None:
-        """Change the queue bound and the slop, keeping what is queued (oldest dropped past the bound)."""
+        """Change the queue bound and the slop, keeping what is queued (oldest dropped past the
+        bound)."""
         if queue_size is not None:
             if queue_size < 1:
                 raise ValueError("queue_size must be >= 1")
@@ -121,7 +132,7 @@ class StampSynchronizer:
         steps = self._steps[index]
         if len(steps) < 2:
             return float("inf")  # the input's rate is not known yet
-        return max(self.reset_ns, 10 * float(np.median(steps)))
+        return max(self.reset_ns, 10 * _median(steps))
 
     def _fits(self, index: int, stamp: int) -> bool | None:
         """Whether ``stamp`` continues input ``index``'s clock (None: no clock yet)."""
@@ -152,7 +163,8 @@ class StampSynchronizer:
         stamp = int(stamp_ns)
         self.accepted, self.outliers_dropped = [], []
         fits = self._fits(index, stamp)
-        others = [self._fits(j, stamp) for j in range(self.n) if j != index and self._ref[j] is not None]
+        others = [self._fits(j, stamp) for j in range(self.n)
+                  if j != index and self._ref[j] is not None]
         if fits is None:
             fits = not others or any(others)
         if fits:
@@ -160,7 +172,8 @@ class StampSynchronizer:
             self._note(index, stamp, False)
             return self._accept(index, stamp, msg)
         held = self._held[index]
-        if held and held[-1][0] < stamp <= held[-1][0] + min(self._ahead_ns(index), self.reset_ns * 1000):
+        if held and held[-1][0] < stamp <= held[-1][0] + min(self._ahead_ns(index),
+                                                             self.reset_ns * 1000):
             held.append((stamp, msg))
         else:
             self._drop_held(index)
@@ -185,7 +198,8 @@ class StampSynchronizer:
                 self.reset()
             else:
                 self.stats.drop("late", index)
-                self.accepted.append((index, stamp_ns, msg))  # a good message, only too late to match
+                # a good message, only too late to match
+                self.accepted.append((index, stamp_ns, msg))
                 return []
         q = self._queues[index]
         keys = [s for s, _ in q]

@@ -90,7 +90,8 @@ class BagWriter:
         with _os_errors(self.path):
             conn = self._conns.get(topic)
             if conn is None:
-                conn = self._conns[topic] = self._writer.add_connection(topic, msgtype, typestore=self._ts)
+                conn = self._conns[topic] = self._writer.add_connection(
+                    topic, msgtype, typestore=self._ts)
             self._writer.write(conn, int(stamp_ns), data)
 
 
@@ -123,7 +124,8 @@ class BagSource:
         if not self.path.exists():
             raise BagError(f"bag not found: {self.path}")
         if self.path.is_file():
-            raise BagError(f"{self.path} is a file; give the bag directory (the one holding metadata.yaml)")
+            raise BagError(f"{self.path} is a file; give the bag directory (the one holding "
+                           "metadata.yaml)")
         if not (self.path / "metadata.yaml").is_file():
             raise BagError(f"{self.path} is not a ROS 2 bag directory (no metadata.yaml)")
         self._reader = None
@@ -142,7 +144,8 @@ class BagSource:
             self.damaged = f"{type(exc).__name__}: {exc}"
             self.topics, self.counts = self._scan_mcap()
             if not self.topics:
-                raise BagError(f"cannot open bag {self.path} ({self.damaged}) and no message is readable") from exc
+                raise BagError(f"cannot open bag {self.path} ({self.damaged}) and no message is "
+                               "readable") from exc
 
     def _records(self):
         """(topic, type, log time, raw) of every readable MCAP message, in file order."""
@@ -162,7 +165,8 @@ class BagSource:
                             topic, msgtype = channels[rec.channel_id]
                             yield topic, msgtype, rec.log_time, rec.data
             except Exception as exc:  # the damage: stop here, say where
-                self.damaged = f"{file.name} unreadable after this point ({type(exc).__name__}: {exc})"
+                self.damaged = (f"{file.name} unreadable after this point "
+                                f"({type(exc).__name__}: {exc})")
                 return
 
     def _scan_mcap(self):
@@ -185,8 +189,8 @@ class BagSource:
                     yield topic, ts, raw
 
     def describe(self) -> str:
-        return ", ".join(f"{t} ({ty}, {self.counts.get(t, 0)} msgs)" for t, ty in sorted(self.topics.items())) \
-            or "no topics"
+        return ", ".join(f"{t} ({ty}, {self.counts.get(t, 0)} msgs)"
+                         for t, ty in sorted(self.topics.items())) or "no topics"
 
     def close(self) -> None:
         if self._reader is not None:

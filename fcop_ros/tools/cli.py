@@ -6,7 +6,8 @@ import argparse
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
     """Shows '(default: X)' for every option that has a default (not for required ones or
-    those whose absence the help text explains), and keeps the description and epilog as written."""
+    those whose absence the help text explains), and keeps the description and epilog as
+    written."""
 
     def _get_help_string(self, action):
         if action.default is None or action.required:

@@ -15,16 +15,20 @@ from ..synthetic import PRESETS, SequenceSpec
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="fcop_demo", description=__doc__, formatter_class=HelpFormatter,
+    ap = argparse.ArgumentParser(prog="fcop_demo", description=__doc__,
+                                 formatter_class=HelpFormatter,
                                  epilog="exit codes:\n  0   done\n  1   nothing was estimated\n"
                                         "  2   the bag or the outputs could not be written")
-    ap.add_argument("--out", default="out/demo", help="directory for the bag and the replay outputs")
+    ap.add_argument("--out", default="out/demo",
+                    help="directory for the bag and the replay outputs")
     ap.add_argument("--frames", type=int, default=60, help="number of frames (640x480 at 30 Hz)")
     ap.add_argument("--preset", default="moderate", choices=sorted(PRESETS), help="noise preset")
-    ap.add_argument("--focal", type=float, default=600.0, help="true focal length before the zoom, pixels")
+    ap.add_argument("--focal", type=float, default=600.0,
+                    help="true focal length before the zoom, pixels")
     ap.add_argument("--zoom-focal", type=float, default=750.0,
                     help="true focal length after the zoom at 2/3 of the frames, pixels")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the scene and of the node's triplet sampling")
+    ap.add_argument("--seed", type=int, default=0,
+                    help="seed of the scene and of the node's triplet sampling")
     return ap
 
 
@@ -39,9 +43,11 @@ def main(argv=None) -> int:
         shutil.rmtree(bag)
     out.mkdir(parents=True, exist_ok=True)
     zoom_frame = (2 * args.frames) // 3
-    spec = SequenceSpec(args.frames, 640, 480, args.focal, zoom_frame, args.zoom_focal, args.preset)
-    print(f"1/2 writing a synthetic bag: {args.frames} frames 640x480 at 30 Hz, 5 objects, noise preset "
-          f"'{args.preset}', true focal {args.focal:.0f} px, zoom to {args.zoom_focal:.0f} px at frame {zoom_frame}")
+    spec = SequenceSpec(args.frames, 640, 480, args.focal, zoom_frame, args.zoom_focal,
+                        args.preset)
+    print(f"1/2 writing a synthetic bag: {args.frames} frames 640x480 at 30 Hz, 5 objects, "
+          f"noise preset '{args.preset}', true focal {args.focal:.0f} px, zoom to "
+          f"{args.zoom_focal:.0f} px at frame {zoom_frame}")
     t0 = time.perf_counter()
     bar = None
     if sys.stderr.isatty():
@@ -56,8 +62,8 @@ def main(argv=None) -> int:
         print(f"    {bag} written in {time.perf_counter() - t0:.1f} s ({size / 1e6:.0f} MB, zstd)")
         print("2/2 replaying it through fcop_node (in-process, over DDS)")
         # A fixed triplet-sampling seed makes the printed figures repeatable run to run.
-        summary = replay(bag, TOPICS["depth"], TOPICS["nocs"], TOPICS["mask"], out, truth_topic=TOPICS["truth"],
-                         overrides=[f"seed:={args.seed}"])
+        summary = replay(bag, TOPICS["depth"], TOPICS["nocs"], TOPICS["mask"], out,
+                         truth_topic=TOPICS["truth"], overrides=[f"seed:={args.seed}"])
     except (BagError, OSError, ReplayError) as exc:
         print(f"fcop_demo: {exc}", file=sys.stderr)
         return 2

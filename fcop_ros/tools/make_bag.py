@@ -13,8 +13,9 @@ import argparse
 import sys
 import time
 
-from msg_adapters import (DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS, camera_info, depth_to_image,
-                          header_from_ns, mask_to_image, nocs_to_image, pose_array)
+from msg_adapters import (DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS, camera_info,
+                          depth_to_image, header_from_ns, mask_to_image, nocs_to_image,
+                          pose_array)
 
 from .bagio import COMPRESSIONS, STORAGES, BagError, BagWriter
 from .cli import HelpFormatter
@@ -26,9 +27,10 @@ TOPICS = dict(depth="/camera/depth", nocs="/camera/nocs", mask="/camera/mask",
 FRAME_ID = "camera_optical_frame"
 
 
-def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0, storage: str = "mcap",
-             depth_encoding: str = "32FC1", nocs_encoding: str = "32FC3", mask_encoding: str = "mono8",
-             depth_scale: float = 0.001, start_ns: int = 1_700_000_000_000_000_000, progress=None,
+def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0,
+             storage: str = "mcap", depth_encoding: str = "32FC1", nocs_encoding: str = "32FC3",
+             mask_encoding: str = "mono8", depth_scale: float = 0.001,
+             start_ns: int = 1_700_000_000_000_000_000, progress=None,
              compression: str = "none") -> int:
     """Write the bag; returns the number of frames. Stamps start at ``start_ns``, 1/rate apart.
     ``progress(frames written)`` is called after every frame."""
@@ -41,12 +43,15 @@ def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0, sto
         for k, frame in camera_sequence(spec, seed):
             stamp = start_ns + k * step
             h = header_from_ns(stamp, FRAME_ID)
-            bag.write(TOPICS["depth"], depth_to_image(frame.depth, depth_encoding, h, depth_scale), stamp)
+            bag.write(TOPICS["depth"], depth_to_image(frame.depth, depth_encoding, h, depth_scale),
+                      stamp)
             bag.write(TOPICS["nocs"], nocs_to_image(frame.nocs, nocs_encoding, h), stamp)
             bag.write(TOPICS["mask"], mask_to_image(frame.mask, mask_encoding, h), stamp)
             cx, cy = frame.principal_point
-            bag.write(TOPICS["truth"], camera_info(frame.focal, cx, cy, spec.width, spec.height, h), stamp)
-            truth = [ObjectPose(o.instance_id, o.rotation, o.translation, o.scale, 1.0, 0.0, 0) for o in frame.objects]
+            bag.write(TOPICS["truth"],
+                      camera_info(frame.focal, cx, cy, spec.width, spec.height, h), stamp)
+            truth = [ObjectPose(o.instance_id, o.rotation, o.translation, o.scale, 1.0, 0.0, 0)
+                     for o in frame.objects]
             bag.write(TOPICS["poses"], pose_array(truth, h), stamp)
             n += 1
             if progress:
@@ -61,28 +66,34 @@ EXIT_CODES_TEXT = """exit codes:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="fcop_make_bag", description=__doc__, epilog=EXIT_CODES_TEXT,
-                                 formatter_class=HelpFormatter)
+    ap = argparse.ArgumentParser(prog="fcop_make_bag", description=__doc__,
+                                 epilog=EXIT_CODES_TEXT, formatter_class=HelpFormatter)
     ap.add_argument("out", help="bag directory to create (must not exist)")
     ap.add_argument("--frames", type=int, default=60, help="number of frames")
     ap.add_argument("--rate", type=float, default=30.0, help="frames per second (stamp spacing)")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the scene, its motion and its noise")
+    ap.add_argument("--seed", type=int, default=0,
+                    help="seed of the scene, its motion and its noise")
     ap.add_argument("--preset", default="moderate", choices=sorted(PRESETS),
                     help="noise preset imitating learned depth and NOCS predictors")
     ap.add_argument("--focal", type=float, default=600.0, help="true focal length, pixels")
     ap.add_argument("--zoom-frame", type=int, default=None,
-                    help="frame at which the focal length changes (with --zoom-focal; default: no zoom)")
+                    help="frame at which the focal length changes (with --zoom-focal; "
+                         "default: no zoom)")
     ap.add_argument("--zoom-focal", type=float, default=None,
                     help="focal length from --zoom-frame on, pixels (default: no zoom)")
     ap.add_argument("--width", type=int, default=640, help="image width, pixels")
     ap.add_argument("--height", type=int, default=480, help="image height, pixels")
     ap.add_argument("--objects", type=int, default=5, help="objects in the scene")
-    ap.add_argument("--storage", default="mcap", choices=sorted(STORAGES), help="rosbag2 storage plugin")
+    ap.add_argument("--storage", default="mcap", choices=sorted(STORAGES),
+                    help="rosbag2 storage plugin")
     ap.add_argument("--compression", default="zstd", choices=COMPRESSIONS,
                     help="zstd: compressed MCAP chunks, or every message for sqlite3; none: plain")
-    ap.add_argument("--depth-encoding", default="32FC1", choices=DEPTH_ENCODINGS, help="depth image encoding")
-    ap.add_argument("--nocs-encoding", default="32FC3", choices=NOCS_ENCODINGS, help="NOCS image encoding")
-    ap.add_argument("--mask-encoding", default="mono8", choices=MASK_ENCODINGS, help="instance mask encoding")
+    ap.add_argument("--depth-encoding", default="32FC1", choices=DEPTH_ENCODINGS,
+                    help="depth image encoding")
+    ap.add_argument("--nocs-encoding", default="32FC3", choices=NOCS_ENCODINGS,
+                    help="NOCS image encoding")
+    ap.add_argument("--mask-encoding", default="mono8", choices=MASK_ENCODINGS,
+                    help="instance mask encoding")
     return ap
 
 
@@ -94,8 +105,8 @@ def main(argv=None) -> int:
     if args.frames < 1 or args.width < 8 or args.height < 8:
         print("fcop_make_bag: need --frames >= 1 and an image of at least 8x8", file=sys.stderr)
         return 2
-    spec = SequenceSpec(args.frames, args.width, args.height, args.focal, args.zoom_frame, args.zoom_focal,
-                        args.preset, args.objects)
+    spec = SequenceSpec(args.frames, args.width, args.height, args.focal, args.zoom_frame,
+                        args.zoom_focal, args.preset, args.objects)
     bar = None
     if sys.stderr.isatty():
         from tqdm import tqdm

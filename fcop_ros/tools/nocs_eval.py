@@ -35,7 +35,8 @@ def parse_intrinsics(text: str):
     try:
         fx, fy, cx, cy = (float(v) for v in text.split(","))
     except ValueError:
-        raise ValueError(f"intrinsics must be real275, camera25 or fx,fy,cx,cy; got {text!r}") from None
+        raise ValueError(
+            f"intrinsics must be real275, camera25 or fx,fy,cx,cy; got {text!r}") from None
     return fx, fy, cx, cy
 
 
@@ -71,7 +72,8 @@ def load_depth(path: Path) -> np.ndarray:
         raw = raw[:, :, 1].astype(np.uint32) * 256 + raw[:, :, 2]
         raw = np.where(raw == 32001, 0, raw)
     elif raw.dtype != np.uint16:
-        raise ValueError(f"{path}: depth must be uint16 millimetres or the 3-channel CAMERA encoding, got {raw.dtype}")
+        raise ValueError(f"{path}: depth must be uint16 millimetres or the 3-channel CAMERA "
+                         f"encoding, got {raw.dtype}")
     d = raw.astype(np.float32) / 1000.0
     d[raw == 0] = np.nan
     return d
@@ -93,7 +95,8 @@ def find_frames(root: Path):
                   if p.with_name(p.name[: -len("_mask.png")] + "_coord.png").exists())
 
 
-def load_frame(prefix: Path, root: Path, depth_dir: Path | None = None, nocs_dir: Path | None = None):
+def load_frame(prefix: Path, root: Path, depth_dir: Path | None = None,
+               nocs_dir: Path | None = None):
     """depth (m), nocs and mask of one frame, with predicted depth / NOCS when given; instances
     not listed as objects in the meta file are removed from the mask."""
     rel = prefix.relative_to(root)
@@ -113,14 +116,17 @@ def load_frame(prefix: Path, root: Path, depth_dir: Path | None = None, nocs_dir
     return depth, nocs, mask
 
 
-def write_frame(prefix: Path, depth: np.ndarray, nocs: np.ndarray, mask: np.ndarray, classes: dict[int, int]) -> None:
-    """Write a frame in the NOCS layout (the inverse of the loader), e.g. from a rendered scene."""
+def write_frame(prefix: Path, depth: np.ndarray, nocs: np.ndarray, mask: np.ndarray,
+                classes: dict[int, int]) -> None:
+    """Write a frame in the NOCS layout (the inverse of the loader), e.g. from a rendered
+    scene."""
     prefix.parent.mkdir(parents=True, exist_ok=True)
     mm = np.where(np.isfinite(depth) & (depth > 0), np.round(depth * 1000.0), 0)
     cv2.imwrite(str(prefix) + "_depth.png", np.clip(mm, 0, 65535).astype(np.uint16))
     rgb = np.stack([nocs[..., 0], nocs[..., 1], 1.0 - nocs[..., 2]], -1)
     rgb[mask == 0] = 0
-    cv2.imwrite(str(prefix) + "_coord.png", np.clip(np.round(rgb * 255), 0, 255).astype(np.uint8)[..., ::-1])
+    cv2.imwrite(str(prefix) + "_coord.png",
+                np.clip(np.round(rgb * 255), 0, 255).astype(np.uint8)[..., ::-1])
     m = np.where(mask > 0, mask, 255).astype(np.uint8)
     cv2.imwrite(str(prefix) + "_mask.png", m)
     lines = [f"{iid} {cls} model_{iid}" for iid, cls in sorted(classes.items())]
@@ -151,7 +157,8 @@ def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None,
         err = None if est.focal is None else 100.0 * (est.focal / f_true - 1.0)
         rows.append({"scene": scene, "frame": rel.name, "focal_true": f_true,
                      "focal": "" if est.focal is None else round(est.focal, 4),
-                     "error_pct": "" if err is None else round(err, 4), "objects": len(est.objects),
+                     "error_pct": "" if err is None else round(err, 4),
+                     "objects": len(est.objects),
                      "inlier_ratio": round(est.inlier_ratio, 4), "reason": est.reason})
         if progress:
             progress(n + 1, len(frames))
@@ -176,16 +183,20 @@ def _median_abs(rows):
 def build_parser() -> argparse.ArgumentParser:
     from .cli import HelpFormatter
 
-    ap = argparse.ArgumentParser(prog="fcop_eval_nocs", description=__doc__, formatter_class=HelpFormatter,
-                                 epilog="exit codes:\n  0   done\n  2   unusable input (missing directory, "
-                                        "no frame, bad --intrinsics)")
-    ap.add_argument("dir", help="dataset directory (scenes of *_mask.png, *_coord.png, *_depth.png, *_meta.txt)")
-    ap.add_argument("--intrinsics", required=True, help="real275, camera25 or fx,fy,cx,cy (required)")
+    ap = argparse.ArgumentParser(prog="fcop_eval_nocs", description=__doc__,
+                                 formatter_class=HelpFormatter,
+                                 epilog="exit codes:\n  0   done\n  2   unusable input (missing "
+                                        "directory, no frame, bad --intrinsics)")
+    ap.add_argument("dir", help="dataset directory (scenes of *_mask.png, *_coord.png, "
+                                "*_depth.png, *_meta.txt)")
+    ap.add_argument("--intrinsics", required=True,
+                    help="real275, camera25 or fx,fy,cx,cy (required)")
     ap.add_argument("--depth", default="sensor", help="'sensor' or a directory of predicted depth")
     ap.add_argument("--nocs", default="gt", help="'gt' or a directory of predicted *_coord.png")
     ap.add_argument("--csv", default="nocs_eval.csv", help="per-frame results")
     ap.add_argument("--image-centre", action="store_true",
-                    help="assume the principal point at the image centre (as the paper does) instead of cx, cy")
+                    help="assume the principal point at the image centre (as the paper does) "
+                         "instead of cx, cy")
     return ap
 
 
@@ -199,12 +210,14 @@ def main(argv=None) -> int:
             if d is not None and not d.is_dir():
                 raise FileNotFoundError(f"{what} directory not found: {d}")
         t0 = time.perf_counter()
-        rows, summary = evaluate(args.dir, intr, depth_dir, nocs_dir, args.csv, not args.image_centre)
-    except (OSError, ValueError) as exc:  # OSError: missing input, or a --csv that cannot be written
+        rows, summary = evaluate(args.dir, intr, depth_dir, nocs_dir, args.csv,
+                                 not args.image_centre)
+    # OSError: missing input, or a --csv that cannot be written
+    except (OSError, ValueError) as exc:
         print(f"fcop_eval_nocs: {exc}", file=sys.stderr)
         return 2
-    print(f"{len(rows)} frames in {time.perf_counter() - t0:.1f} s; median |focal error| per scene "
-          f"(frames with an estimate / frames):\n")
+    print(f"{len(rows)} frames in {time.perf_counter() - t0:.1f} s; median |focal error| per "
+          f"scene (frames with an estimate / frames):\n")
     print("| scene | median error % | frames |")
     print("|---|---|---|")
     for scene, (med, n_ok, n) in summary.items():
