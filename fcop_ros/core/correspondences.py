@@ -177,32 +177,24 @@ def _gradient(img: np.ndarray, ok: np.ndarray) -> np.ndarray:
     return g
 
 
-def _local_means(w: np.ndarray, radius: int, *imgs):
-    """Mean of each of ``imgs`` (2-D or 3-D) over the pixels with w=1 in a (2r+1)^2 box, and
-    the count: (mean, ..., count). One box filter of all channels stacked (OpenCV filters every
-    channel alike, so each gets the values of a filter of its own)."""
+def _local_means(w: np.ndarray, radius: int, vals: np.ndarray):
+    """Mean of each plane of ``vals`` (C,H,W) over the pixels with w=1 in a (2r+1)^2 box, and
+    the count: (means (C,H,W), count (H,W)).
+
+    One single-channel box filter of the weight and the weighted planes stacked one above the
+    other, each followed by r rows of zeros, so that no box reaches into the next plane: the
+    same sums as a filter of each plane of its own, in one OpenCV call and a few whole-stack
+    numpy operations on contiguous rows. Products are formed in float64 and rounded to float32,
+    quotients are float32, widened to float64."""
+    c, h, wd = vals.shape
     k = (2 * radius + 1, 2 * radius + 1)
-    wf = w.astype(np.float32)
-    planes = [wf]
-    for im in imgs:  # products formed in float64 and rounded to float32 on output
-        for c in range(1 if im.ndim == 2 else im.shape[2]):
-            planes.append(np.multiply(im if im.ndim == 2 else im[..., c], wf,
-                                      out=np.empty(wf.shape, np.float32)))
-    sums = cv2.split(cv2.boxFilter(cv2.merge(planes), -1, k, normalize=False,
-                                   borderType=cv2.BORDER_CONSTANT))
+    buf = np.zeros((c + 1, h + radius, wd), np.float32)
+    buf[0, :h] = w
+    np.multiply(vals, buf[0, :h], out=buf[1:, :h])
+    sums = cv2.boxFilter(buf.reshape(-1, wd), -1, k, normalize=False,
+                         borderType=cv2.BORDER_CONSTANT).reshape(buf.shape)[:, :h]
     cnt = np.maximum(sums[0], 1e-6)
-    out, c = [], 1
-    for im in imgs:  # float32 quotients, widened to float64 on output
-        if im.ndim == 2:
-            out.append(np.divide(sums[c], cnt, out=np.empty(cnt.shape)))
-            c += 1
-        else:
-            mean = np.empty(im.shape)
-            for j in range(im.shape[2]):
-                np.divide(sums[c + j], cnt, out=mean[..., j])
-            out.append(mean)
-            c += im.shape[2]
-    return (*out, sums[0].astype(np.float64))
+    return np.divide(sums[1:], cnt, out=np.empty(vals.shape)), sums[0].astype(np.float64)
 
 
 def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pixels: int = 50,
@@ -269,11 +261,15 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
             ok &= nonzero
         if ok.sum() < max(min_object_pixels, 3):
             continue
-        dz = np.where(ok, dc, 0.0)
-        pz = np.where(ok[..., None], pc, 0.0)
+        # Planes of depth, NOCS and (later) the camera-plane points d u, d v, zero off the valid
+        # pixels: every local mean below is one box filter of a stack of them.
+        V = np.zeros((6,) + ok.shape)
+        np.copyto(V[0], dc, where=ok)  # not a product: invalid depth may be NaN or inf
+        np.copyto(V[1:4], pc.transpose(2, 0, 1), where=ok)
+        dz, pz = V[0], V[1:4]
         sigma_d = _second_diff_sigma(dz, ok)
         # NOCS noise from the channel sum (independent channel noise adds up in variance).
-        sigma_p = _second_diff_sigma(pz[..., 0] + pz[..., 1] + pz[..., 2], ok) / np.sqrt(3.0)
+        sigma_p = _second_diff_sigma(pz[0] + pz[1] + pz[2], ok) / np.sqrt(3.0)
         # Below the floor the "noise" is surface curvature: treat the data as exact (no
         # smoothing, whose curvature bias would then dominate, and no bias correction).
         depth_med = float(_median(_thin(dz[ok])))
@@ -285,17 +281,19 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         x_img = None
         if denoise_radius > 0 or outlier_sigma > 0:
             rad = max(int(round(denoise_radius / st)), 1)  # the same window in image pixels
-            md, mp, cnt = _local_means(ok, rad, dz, pz)
+            means, cnt = _local_means(ok, rad, V[:4])
+            md, mp = means[0], means[1:4]
             if outlier_sigma > 0:
                 rd = np.abs(dz - md)
                 dp = pz - mp
-                rp = np.sqrt(dp[..., 0] ** 2 + dp[..., 1] ** 2 + dp[..., 2] ** 2)
+                rp = np.sqrt(dp[0] ** 2 + dp[1] ** 2 + dp[2] ** 2)
                 thr_d = outlier_sigma * max(MAD_TO_SIGMA * _median(_thin(rd[ok])), 1e-9 * depth_med)
                 thr_p = outlier_sigma * max(MAD_TO_SIGMA * _median(_thin(rp[ok])), 1e-9)
                 ok2 = ok & (rd <= thr_d) & (rp <= thr_p)
                 if ok2.sum() >= max(min_object_pixels, 3) and not np.array_equal(ok2, ok):
                     ok = ok2
-                    md, mp, cnt = _local_means(ok, rad, dz, pz)
+                    means, cnt = _local_means(ok, rad, V[:4])
+                    md, mp = means[0], means[1:4]
             means_of = ok  # the pixels md, mp and cnt are means over
             if edge_sigma > 0:
                 # Depth bleeding across object boundaries makes steep ramps: drop pixels whose
@@ -314,10 +312,14 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                 # object (a focal bias of several percent on small objects).
                 uu = (np.arange(c0, c1, st)[: dz.shape[1]] - cx)[None, :]
                 vv = (np.arange(r0, r1, st)[: dz.shape[0]] - cy)[:, None]
+                np.multiply(dz, uu, out=V[4])
+                np.multiply(dz, vv, out=V[5])
                 if ok is not means_of:
-                    md, mp, mu, mv, cnt = _local_means(ok, rad, dz, pz, dz * uu, dz * vv)
+                    means, cnt = _local_means(ok, rad, V)
+                    md, mp = means[0], means[1:4]
                 else:
-                    mu, mv, _ = _local_means(ok, rad, dz * uu, dz * vv)
+                    means, _ = _local_means(ok, rad, V[4:])
+                mu, mv = means[-2], means[-1]
                 with np.errstate(divide="ignore", invalid="ignore"):
                     x_img = (mu / md, mv / md)
                 dz, pz = md, mp
@@ -334,7 +336,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         else:
             x = np.column_stack([x_img[0][rr, cc], x_img[1][rr, cc]])
         out.append(Instance(int(iid), x, dz[rr, cc].astype(np.float64, copy=False),
-                            pz[rr, cc].astype(np.float64, copy=False),
+                            np.ascontiguousarray(pz[:, rr, cc].T),
                             var_d_img[rr, cc].astype(np.float64, copy=False), sigma_d, sigma_p,
                             int(npix), int(valid)))
     return out
