@@ -74,7 +74,8 @@ def check_images(depth, nocs, mask):
     if mask.ndim != 2:
         raise ValueError(f"mask must be an (H,W) image, got shape {mask.shape}")
     if not (depth.shape == nocs.shape[:2] == mask.shape):
-        raise ValueError(f"image sizes differ: depth {depth.shape}, nocs {nocs.shape[:2]}, mask {mask.shape}")
+        raise ValueError(f"image sizes differ: depth {depth.shape}, nocs {nocs.shape[:2]}, "
+                         f"mask {mask.shape}")
     if not (np.issubdtype(depth.dtype, np.floating) or np.issubdtype(depth.dtype, np.integer)):
         raise ValueError(f"depth must be numeric, got dtype {depth.dtype}")
     if not (np.issubdtype(nocs.dtype, np.floating) or np.issubdtype(nocs.dtype, np.integer)):
@@ -94,7 +95,8 @@ def instance_ids(mask: np.ndarray, min_pixels: int = 1):
     if top <= 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     if top <= 1 << 20:
-        counts = np.bincount(flat if flat.dtype.kind == "u" else np.maximum(flat, 0), minlength=top + 1)
+        counts = np.bincount(flat if flat.dtype.kind == "u" else np.maximum(flat, 0),
+                             minlength=top + 1)
         ids = np.flatnonzero(counts)
         ids = ids[ids > 0]
         counts = counts[ids]
@@ -109,8 +111,8 @@ def _bounding_boxes(labels: np.ndarray, ids: np.ndarray):
     ``labels`` holds no negative values."""
     if ids.max() <= 1 << 16:
         objs = ndimage.find_objects(labels, max_label=int(ids.max()))
-        return [(objs[i - 1][0].start, objs[i - 1][0].stop, objs[i - 1][1].start, objs[i - 1][1].stop)
-                for i in ids]
+        return [(objs[i - 1][0].start, objs[i - 1][0].stop, objs[i - 1][1].start,
+                 objs[i - 1][1].stop) for i in ids]
     boxes = []
     for iid in ids:
         r = np.flatnonzero((labels == iid).any(1))
@@ -199,7 +201,8 @@ def _local_means(w: np.ndarray, radius: int, vals: np.ndarray):
 
 def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pixels: int = 50,
                       erode_px: int = 1, denoise_radius: int = 2, outlier_sigma: float = 4.0,
-                      max_pixels: int = 2000, nocs_tolerance: float = 0.05, noise_floor: float = 5e-4,
+                      max_pixels: int = 2000, nocs_tolerance: float = 0.05,
+                      noise_floor: float = 5e-4,
                       edge_sigma: float = 0.0, max_instances: int | None = None,
                       rng: np.random.Generator | None = None):
     """Build the per-instance correspondences of one frame (see the module docstring).
@@ -242,7 +245,8 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         r0, r1, c0, c1 = max(r0 - pad, 0), min(r1 + pad, h), max(c0 - pad, 0), min(c1 + pad, w)
         inst = mask[r0:r1, c0:c1] == iid
         if erode_px > 0:
-            inst = cv2.erode(inst.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=int(erode_px),
+            inst = cv2.erode(inst.astype(np.uint8), np.ones((3, 3), np.uint8),
+                             iterations=int(erode_px),
                              borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
         # Large instances are processed on a strided grid: far more pixels than max_pixels add
         # cost but little accuracy.
@@ -275,7 +279,8 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         depth_med = float(_median(_thin(dz[ok])))
         if sigma_d < noise_floor * depth_med:
             sigma_d = 0.0
-        if sigma_p < 4 * noise_floor:  # NOCS curvature is larger: an object spans ~200 px of ~1 NOCS unit
+        # NOCS curvature is larger: an object spans ~200 px of ~1 NOCS unit.
+        if sigma_p < 4 * noise_floor:
             sigma_p = 0.0
         var_d_img = np.full(dz.shape, sigma_d ** 2)
         x_img = None
@@ -287,7 +292,8 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                 rd = np.abs(dz - md)
                 dp = pz - mp
                 rp = np.sqrt(dp[0] ** 2 + dp[1] ** 2 + dp[2] ** 2)
-                thr_d = outlier_sigma * max(MAD_TO_SIGMA * _median(_thin(rd[ok])), 1e-9 * depth_med)
+                thr_d = outlier_sigma * max(MAD_TO_SIGMA * _median(_thin(rd[ok])),
+                                            1e-9 * depth_med)
                 thr_p = outlier_sigma * max(MAD_TO_SIGMA * _median(_thin(rp[ok])), 1e-9)
                 ok2 = ok & (rd <= thr_d) & (rp <= thr_p)
                 if ok2.sum() >= max(min_object_pixels, 3) and not np.array_equal(ok2, ok):
@@ -301,15 +307,16 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                 g = _gradient(md, ok)
                 gv = g[ok & (g > 0)]
                 if gv.size >= 8:
-                    thr_g = edge_sigma * MAD_TO_SIGMA * _median(_thin(gv)) + noise_floor * depth_med
+                    thr_g = (edge_sigma * MAD_TO_SIGMA * _median(_thin(gv))
+                             + noise_floor * depth_med)
                     ok2 = ok & (g <= thr_g)
                     if ok2.sum() >= max(min_object_pixels, 3):
                         ok = ok2
             if denoise_radius > 0 and (sigma_d > 0 or sigma_p > 0):
-                # Average whole correspondences, not one channel: the model is affine in the camera
-                # point (d u, d v, d) and in the NOCS, so means over the same pixels stay on it, even
-                # at the border, where the window is one-sided and smoothing NOCS alone shrinks the
-                # object (a focal bias of several percent on small objects).
+                # Average whole correspondences, not one channel: the model is affine in the
+                # camera point (d u, d v, d) and in the NOCS, so means over the same pixels stay
+                # on it, even at the border, where the window is one-sided and smoothing NOCS
+                # alone shrinks the object (a focal bias of several percent on small objects).
                 uu = (np.arange(c0, c1, st)[: dz.shape[1]] - cx)[None, :]
                 vv = (np.arange(r0, r1, st)[: dz.shape[0]] - cy)[:, None]
                 np.multiply(dz, uu, out=V[4])

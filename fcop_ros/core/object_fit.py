@@ -35,11 +35,11 @@ class ObjectFits:
     (O,3); quality: share of the object's 3D variance the similarity explains (1 = perfect, ~0 for
     NOCS unrelated to the shape); mirrored: the best orthogonal fit is a reflection and explains
     clearly more than the best rotation; sigma_px, sigma_depth: residual noise levels (px, m);
-    inlier_ratio: share of pixels with a Cauchy weight above 0.5; pixels: pixels used; ok: fit usable;
-    relief: the fitted object's depth relief (standard deviation of its model points' z, metres);
-    tilt: (O,2) the fitted relative depth-error gradient over the object (per standard deviation
-    of its image extent along x and y; zeros without ``depth_tilt``); tilt_chi2: its chi-square
-    (2 degrees of freedom) against zero.
+    inlier_ratio: share of pixels with a Cauchy weight above 0.5; pixels: pixels used; ok: fit
+    usable; relief: the fitted object's depth relief (standard deviation of its model points' z,
+    metres); tilt: (O,2) the fitted relative depth-error gradient over the object (per standard
+    deviation of its image extent along x and y; zeros without ``depth_tilt``); tilt_chi2: its
+    chi-square (2 degrees of freedom) against zero.
     """
 
     focal: np.ndarray
@@ -70,7 +70,8 @@ def _pad(instances, max_pixels: int, rng: np.random.Generator):
     for k, inst in enumerate(instances):
         n = len(inst.d)
         pick = rng.choice(n, m, replace=False) if n > m else np.arange(n)
-        X[k, :len(pick)], D[k, :len(pick)], P[k, :len(pick)] = inst.x[pick], inst.d[pick], inst.p[pick] - 0.5
+        k_n = len(pick)
+        X[k, :k_n], D[k, :k_n], P[k, :k_n] = inst.x[pick], inst.d[pick], inst.p[pick] - 0.5
         V[k, :len(pick)] = True
     return X, D, P, V
 
@@ -99,7 +100,9 @@ def _orthogonal_fit(P, Y, W, proper: bool):
     quality = total ** 2 / denom
     quality_proper = np.maximum(proper_total, 0) ** 2 / denom
     mirrored = (det < 0) & (quality - quality_proper > 0.2)
-    if proper:  # a rotation unless only a reflection fits (a symmetric object fits both about as well)
+    # With ``proper``: a rotation unless only a reflection fits (a symmetric object fits both
+    # about as well).
+    if proper:
         fix = np.ones_like(S)
         fix[:, 2] = np.where(mirrored, 1.0, np.sign(det))
         Q = (U * fix[:, None, :]) @ Vt
@@ -275,10 +278,12 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
         with np.errstate(all="ignore"):
             tilt_chi2 = np.einsum("oi,oij,oj->o", tilt, np.linalg.pinv(ct), tilt)
     var = np.where(np.isfinite(var) & (var > 0), var, np.inf)
-    ok = np.isfinite(logf) & np.isfinite(logs) & np.all(np.isfinite(t), -1) & (t[:, 2] > 0) & (V.sum(1) >= 6)
+    ok = (np.isfinite(logf) & np.isfinite(logs) & np.all(np.isfinite(t), -1) & (t[:, 2] > 0)
+          & (V.sum(1) >= 6))
     qz = q[:, 2]
     mz = (qz * Vf).sum(1) / np.maximum(Vf.sum(1), 1)
     relief = np.sqrt((((qz - mz[:, None]) ** 2) * Vf).sum(1) / np.maximum(Vf.sum(1), 1))
     return ObjectFits(np.exp(logf), var, np.exp(logs), Rm, t, quality, mirrored, sig_px, sig_d,
-                      (w_rob > 0.5 * Vf).sum(1) / np.maximum(V.sum(1), 1), V.sum(1), ok, relief, tilt,
+                      (w_rob > 0.5 * Vf).sum(1) / np.maximum(V.sum(1), 1), V.sum(1), ok, relief,
+                      tilt,
                       np.where(np.isfinite(tilt_chi2), tilt_chi2, 0.0))
