@@ -214,23 +214,30 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
         ss = (r2 @ w_rob[..., None])[..., 0]  # (O, 3) weighted sums of squares
         sig_px = np.sqrt(np.maximum((ss[:, 0] + ss[:, 1]) / (2 * wsum), (1e-6) ** 2))
         sig_d = np.sqrt(np.maximum(ss[:, 2] / wsum, (1e-7 * t[:, 2]) ** 2))
-        inv_var = np.empty((o, 3))  # 1 / sigma^2 of u, v and d
-        inv_var[:, 0] = 1.0 / sig_px ** 2
-        inv_var[:, 1] = inv_var[:, 0]
-        inv_var[:, 2] = 1.0 / sig_d ** 2
-        e2 = (inv_var * [0.5 / _CAUCHY ** 2, 0.5 / _CAUCHY ** 2, 1.0 / _CAUCHY ** 2])[:, None] @ r2
+        e2_w = np.empty((o, 1, 3))  # r2 -> (e / c)^2: 1 / (2 sigma_px^2 c^2) and 1 / (sigma_d c)^2
+        e2_w[:, 0, 0] = 0.5 / _CAUCHY ** 2 / sig_px ** 2
+        e2_w[:, 0, 1] = e2_w[:, 0, 0]
+        e2_w[:, 0, 2] = 1.0 / _CAUCHY ** 2 / sig_d ** 2
+        e2 = e2_w @ r2
         w_rob = Vf / (1.0 + e2[:, 0])
         if it == iterations - 1:
             break
+        # The Jacobian is formed already scaled by the square roots of the row weights
+        # w_rob / sigma^2 (su for u and v, sd for d), folded into the factors it is built from,
+        # so that J^T W J and J^T W r are plain products, without a weighted copy.
+        sw = np.sqrt(w_rob)
+        su = sw * (1.0 / sig_px)[:, None]
+        sd = sw * (1.0 / sig_d)[:, None]
         # d(prediction)/dX rows for u, v, d times dX/d(log s, w, t) = [q, -[q]x, I], with
         # a = f/z, (uz, vz) = (u, v)/z and the zero and unit entries multiplied out.
-        a = f[:, None] * iz
+        a = f[:, None] * iz * su
         aq = q * a[:, None]  # a qx, a qy, a qz
-        uvz = uvh * iz[:, None]  # uz, vz
+        uvz = uvh * (iz * su)[:, None]  # uz, vz
         B = uvz[:, :, None] * q[:, None]  # (O, 2, 3, M): [uz, vz] x [qx, qy, qz]
-        gq = q * gain[:, None]
+        gs = gain * sd
+        gq = q * gs[:, None]
         if not fix_focal:
-            J[:, 0, :2] = uvh
+            np.multiply(uvh, su[:, None], out=J[:, 0, :2])
         np.subtract(aq[:, :2], B[:, :, 2], out=J[:, k0, :2])  # log s
         J[:, k0, 2] = gq[:, 2]
         np.negative(B[:, :, 1], out=J[:, k0 + 1, :2])  # w_x
@@ -244,13 +251,14 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
         J[:, k0 + 4, 0] = a  # t
         J[:, k0 + 5, 1] = a
         np.negative(uvz, out=J[:, k0 + 6, :2])
-        J[:, k0 + 6, 2] = gain
+        J[:, k0 + 6, 2] = gs
         if depth_tilt:
-            np.multiply(Ut, z[:, None], out=J[:, k0 + 7:, 2])
-        # J^T W J and J^T W r with the row weights w_rob / sigma^2 of u, v and d.
-        Jwf = Jf * (w_rob[:, None] * inv_var[..., None]).reshape(o, 1, 3 * m)
-        H = Jwf @ np.swapaxes(Jf, 1, 2)
-        g = (Jwf @ r.reshape(o, 3 * m, 1))[..., 0]
+            np.multiply(Ut, (z * sd)[:, None], out=J[:, k0 + 7:, 2])
+        rs = np.empty_like(r)  # the residuals scaled alike
+        np.multiply(r[:, :2], su[:, None], out=rs[:, :2])
+        np.multiply(r[:, 2], sd, out=rs[:, 2])
+        H = Jf @ np.swapaxes(Jf, 1, 2)
+        g = (Jf @ rs.reshape(o, 3 * m, 1))[..., 0]
         Hd = H.copy()
         Hd[:, diag, diag] += lam * np.maximum(H[:, diag, diag], 1e-12)
         try:
