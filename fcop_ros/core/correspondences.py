@@ -74,7 +74,8 @@ def check_images(depth, nocs, mask):
     if mask.ndim != 2:
         raise ValueError(f"mask must be an (H,W) image, got shape {mask.shape}")
     if not (depth.shape == nocs.shape[:2] == mask.shape):
-        raise ValueError(f"image sizes differ: depth {depth.shape}, nocs {nocs.shape[:2]}, mask {mask.shape}")
+        raise ValueError(f"image sizes differ: depth {depth.shape}, nocs {nocs.shape[:2]}, "
+                         f"mask {mask.shape}")
     if not (np.issubdtype(depth.dtype, np.floating) or np.issubdtype(depth.dtype, np.integer)):
         raise ValueError(f"depth must be numeric, got dtype {depth.dtype}")
     if not (np.issubdtype(nocs.dtype, np.floating) or np.issubdtype(nocs.dtype, np.integer)):
@@ -94,7 +95,8 @@ def instance_ids(mask: np.ndarray, min_pixels: int = 1):
     if top <= 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     if top <= 1 << 20:
-        counts = np.bincount(flat if flat.dtype.kind == "u" else np.maximum(flat, 0), minlength=top + 1)
+        counts = np.bincount(flat if flat.dtype.kind == "u" else np.maximum(flat, 0),
+                             minlength=top + 1)
         ids = np.flatnonzero(counts)
         ids = ids[ids > 0]
         counts = counts[ids]
@@ -109,8 +111,8 @@ def _bounding_boxes(labels: np.ndarray, ids: np.ndarray):
     ``labels`` holds no negative values."""
     if ids.max() <= 1 << 16:
         objs = ndimage.find_objects(labels, max_label=int(ids.max()))
-        return [(objs[i - 1][0].start, objs[i - 1][0].stop, objs[i - 1][1].start, objs[i - 1][1].stop)
-                for i in ids]
+        return [(objs[i - 1][0].start, objs[i - 1][0].stop, objs[i - 1][1].start,
+                 objs[i - 1][1].stop) for i in ids]
     boxes = []
     for iid in ids:
         r = np.flatnonzero((labels == iid).any(1))
@@ -177,37 +179,41 @@ def _gradient(img: np.ndarray, ok: np.ndarray) -> np.ndarray:
     return g
 
 
-def _local_means(w: np.ndarray, radius: int, *imgs):
-    """Mean of each of ``imgs`` (2-D or 3-D) over the pixels with w=1 in a (2r+1)^2 box, and
-    the count: (mean, ..., count). One box filter of all channels stacked (OpenCV filters every
-    channel alike, so each gets the values of a filter of its own)."""
+def _local_means(w: np.ndarray, radius: int, vals: np.ndarray):
+    """Mean of each plane of ``vals`` (C,H,W) over the pixels with w=1 in a (2r+1)^2 box, and
+    the count: (means (C,H,W), count (H,W)).
+
+    One single-channel box filter of the weight and the weighted planes stacked one above the
+    other, each followed by r rows of zeros, so that no box reaches into the next plane: the
+    same sums as a filter of each plane of its own, in one OpenCV call and a few whole-stack
+    numpy operations on contiguous rows. Products are formed in float64 and rounded to float32,
+    quotients are float32, widened to float64."""
+    c, h, wd = vals.shape
     k = (2 * radius + 1, 2 * radius + 1)
-    wf = w.astype(np.float32)
-    planes = [wf]
-    for im in imgs:  # products formed in float64 and rounded to float32 on output
-        for c in range(1 if im.ndim == 2 else im.shape[2]):
-            planes.append(np.multiply(im if im.ndim == 2 else im[..., c], wf,
-                                      out=np.empty(wf.shape, np.float32)))
-    sums = cv2.split(cv2.boxFilter(cv2.merge(planes), -1, k, normalize=False,
-                                   borderType=cv2.BORDER_CONSTANT))
+    buf = np.zeros((c + 1, h + radius, wd), np.float32)
+    buf[0, :h] = w
+    np.multiply(vals, buf[0, :h], out=buf[1:, :h])
+    sums = cv2.boxFilter(buf.reshape(-1, wd), -1, k, normalize=False,
+                         borderType=cv2.BORDER_CONSTANT).reshape(buf.shape)[:, :h]
     cnt = np.maximum(sums[0], 1e-6)
-    out, c = [], 1
-    for im in imgs:  # float32 quotients, widened to float64 on output
-        if im.ndim == 2:
-            out.append(np.divide(sums[c], cnt, out=np.empty(cnt.shape)))
-            c += 1
-        else:
-            mean = np.empty(im.shape)
-            for j in range(im.shape[2]):
-                np.divide(sums[c + j], cnt, out=mean[..., j])
-            out.append(mean)
-            c += im.shape[2]
-    return (*out, sums[0].astype(np.float64))
+    return np.divide(sums[1:], cnt, out=np.empty(vals.shape)), sums[0].astype(np.float64)
+
+
+def _band_means(w: np.ndarray, bands, vals: np.ndarray):
+    """_local_means over row bands [(radius, start, stop), ...] of a mosaic, each with its own
+    radius (the bands hold whole crops and their zero rows, so no box crosses a band)."""
+    if len(bands) == 1:
+        return _local_means(w, bands[0][0], vals)
+    means, cnt = np.empty(vals.shape), np.empty(w.shape)
+    for rad, y0, y1 in bands:
+        means[:, y0:y1], cnt[y0:y1] = _local_means(w[y0:y1], rad, vals[:, y0:y1])
+    return means, cnt
 
 
 def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pixels: int = 50,
                       erode_px: int = 1, denoise_radius: int = 2, outlier_sigma: float = 4.0,
-                      max_pixels: int = 2000, nocs_tolerance: float = 0.05, noise_floor: float = 5e-4,
+                      max_pixels: int = 2000, nocs_tolerance: float = 0.05,
+                      noise_floor: float = 5e-4,
                       edge_sigma: float = 0.0, max_instances: int | None = None,
                       rng: np.random.Generator | None = None):
     """Build the per-instance correspondences of one frame (see the module docstring).
@@ -245,96 +251,234 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         boxes = None if boxes is None else [boxes[k] for k in top]
     if boxes is None:
         boxes = _bounding_boxes(labels, ids)
+    pad = denoise_radius + erode_px + 1
+    crops = []
     for iid, npix, (r0, r1, c0, c1) in zip(ids, counts, boxes):
-        pad = denoise_radius + erode_px + 1
         r0, r1, c0, c1 = max(r0 - pad, 0), min(r1 + pad, h), max(c0 - pad, 0), min(c1 + pad, w)
         inst = mask[r0:r1, c0:c1] == iid
         if erode_px > 0:
-            inst = cv2.erode(inst.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=int(erode_px),
+            inst = cv2.erode(inst.astype(np.uint8), np.ones((3, 3), np.uint8),
+                             iterations=int(erode_px),
                              borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
         # Large instances are processed on a strided grid: far more pixels than max_pixels add
         # cost but little accuracy.
         st = max(1, int(np.ceil(np.sqrt(npix / (2.0 * max_pixels)))))
-        inst = inst[::st, ::st]
-        dc = depth[r0:r1:st, c0:c1:st].astype(np.float64, copy=False)
-        pc = nocs[r0:r1:st, c0:c1:st].astype(np.float64, copy=False)
-        # Channel by channel: numpy reductions over a length-3 last axis are slow.
-        with np.errstate(invalid="ignore"):
-            ok = inst & (dc > 0) & (dc < np.inf)
-            nonzero = np.zeros_like(ok)
-            for ch in range(3):
-                v = pc[..., ch]
-                ok &= (v >= -nocs_tolerance) & (v <= 1 + nocs_tolerance)  # false for NaN
-                nonzero |= v != 0
-            ok &= nonzero
-        if ok.sum() < max(min_object_pixels, 3):
-            continue
-        dz = np.where(ok, dc, 0.0)
-        pz = np.where(ok[..., None], pc, 0.0)
-        sigma_d = _second_diff_sigma(dz, ok)
-        # NOCS noise from the channel sum (independent channel noise adds up in variance).
-        sigma_p = _second_diff_sigma(pz[..., 0] + pz[..., 1] + pz[..., 2], ok) / np.sqrt(3.0)
-        # Below the floor the "noise" is surface curvature: treat the data as exact (no
-        # smoothing, whose curvature bias would then dominate, and no bias correction).
-        depth_med = float(_median(_thin(dz[ok])))
-        if sigma_d < noise_floor * depth_med:
-            sigma_d = 0.0
-        if sigma_p < 4 * noise_floor:  # NOCS curvature is larger: an object spans ~200 px of ~1 NOCS unit
-            sigma_p = 0.0
-        var_d_img = np.full(dz.shape, sigma_d ** 2)
-        x_img = None
-        if denoise_radius > 0 or outlier_sigma > 0:
-            rad = max(int(round(denoise_radius / st)), 1)  # the same window in image pixels
-            md, mp, cnt = _local_means(ok, rad, dz, pz)
-            if outlier_sigma > 0:
-                rd = np.abs(dz - md)
-                dp = pz - mp
-                rp = np.sqrt(dp[..., 0] ** 2 + dp[..., 1] ** 2 + dp[..., 2] ** 2)
-                thr_d = outlier_sigma * max(MAD_TO_SIGMA * _median(_thin(rd[ok])), 1e-9 * depth_med)
-                thr_p = outlier_sigma * max(MAD_TO_SIGMA * _median(_thin(rp[ok])), 1e-9)
-                ok2 = ok & (rd <= thr_d) & (rp <= thr_p)
-                if ok2.sum() >= max(min_object_pixels, 3) and not np.array_equal(ok2, ok):
-                    ok = ok2
-                    md, mp, cnt = _local_means(ok, rad, dz, pz)
-            means_of = ok  # the pixels md, mp and cnt are means over
-            if edge_sigma > 0:
-                # Depth bleeding across object boundaries makes steep ramps: drop pixels whose
-                # (smoothed) depth gradient is far above the instance's typical gradient.
-                g = _gradient(md, ok)
-                gv = g[ok & (g > 0)]
-                if gv.size >= 8:
-                    thr_g = edge_sigma * MAD_TO_SIGMA * _median(_thin(gv)) + noise_floor * depth_med
-                    ok2 = ok & (g <= thr_g)
-                    if ok2.sum() >= max(min_object_pixels, 3):
-                        ok = ok2
-            if denoise_radius > 0 and (sigma_d > 0 or sigma_p > 0):
-                # Average whole correspondences, not one channel: the model is affine in the camera
-                # point (d u, d v, d) and in the NOCS, so means over the same pixels stay on it, even
-                # at the border, where the window is one-sided and smoothing NOCS alone shrinks the
-                # object (a focal bias of several percent on small objects).
-                uu = (np.arange(c0, c1, st)[: dz.shape[1]] - cx)[None, :]
-                vv = (np.arange(r0, r1, st)[: dz.shape[0]] - cy)[:, None]
-                if ok is not means_of:
-                    md, mp, mu, mv, cnt = _local_means(ok, rad, dz, pz, dz * uu, dz * vv)
-                else:
-                    mu, mv, _ = _local_means(ok, rad, dz * uu, dz * vv)
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    x_img = (mu / md, mv / md)
-                dz, pz = md, mp
-                var_d_img = sigma_d ** 2 / np.maximum(cnt, 1.0)
-        rr, cc = np.nonzero(ok)
+        crops.append(_Crop(int(iid), int(npix), r0, c0, st, inst[::st, ::st],
+                           depth[r0:r1:st, c0:c1:st], nocs[r0:r1:st, c0:c1:st]))
+    # All instances are processed together, their crops stacked in one mosaic, ordered by the
+    # radius of their box filter (the same window in image pixels: it follows the stride).
+    if not crops:
+        return out
+    rads = [max(int(round(denoise_radius / cr.st)), 1) for cr in crops]
+    order = sorted(range(len(crops)), key=rads.__getitem__)
+    found = _extract_mosaic([crops[k] for k in order], order, [rads[k] for k in order], (cx, cy),
+                            min_object_pixels, denoise_radius, outlier_sigma, nocs_tolerance,
+                            noise_floor, edge_sigma)
+    for k in sorted(found):  # in instance-id order: the random subsets draw as before
+        cr = crops[k]
+        res = found[k]
+        rr, cc = res.rr, res.cc
         valid = rr.size
-        if valid < max(min_object_pixels, 3):
-            continue
         if valid > max_pixels:
             pick = rng.choice(valid, size=max_pixels, replace=False)
             rr, cc = rr[pick], cc[pick]
-        if x_img is None:
-            x = np.column_stack([cc * st + c0 - cx, rr * st + r0 - cy]).astype(np.float64)
+        y0 = res.y0
+        if res.x_img is None:
+            x = np.column_stack([cc * cr.st + cr.c0 - cx,
+                                 (rr - y0) * cr.st + cr.r0 - cy]).astype(np.float64)
+            var_d = np.full(rr.size, res.sigma_d ** 2)
         else:
-            x = np.column_stack([x_img[0][rr, cc], x_img[1][rr, cc]])
-        out.append(Instance(int(iid), x, dz[rr, cc].astype(np.float64, copy=False),
-                            pz[rr, cc].astype(np.float64, copy=False),
-                            var_d_img[rr, cc].astype(np.float64, copy=False), sigma_d, sigma_p,
-                            int(npix), int(valid)))
+            x = np.column_stack([res.x_img[0][rr, cc], res.x_img[1][rr, cc]])
+            var_d = res.sigma_d ** 2 / np.maximum(res.cnt[rr, cc], 1.0)
+        out.append(Instance(cr.iid, x, res.dz[rr, cc].astype(np.float64, copy=False),
+                            np.ascontiguousarray(res.pz[:, rr, cc].T), var_d, res.sigma_d,
+                            res.sigma_p, cr.npix, int(valid)))
     return out
+
+
+@dataclass
+class _Crop:
+    """One instance's strided crop: id, mask pixels, top-left corner, stride, eroded mask and
+    the depth and NOCS views."""
+
+    iid: int
+    npix: int
+    r0: int
+    c0: int
+    st: int
+    inst: np.ndarray
+    dc: np.ndarray
+    pc: np.ndarray
+
+
+@dataclass
+class _Found:
+    """An instance's usable pixels (rr, cc) in its mosaic (rows from y0), where to read them,
+    and its noise levels."""
+
+    rr: np.ndarray
+    cc: np.ndarray
+    y0: int
+    dz: np.ndarray
+    pz: np.ndarray
+    x_img: tuple | None
+    cnt: np.ndarray | None
+    sigma_d: float
+    sigma_p: float
+
+
+def _segments(sel: np.ndarray, y0s: np.ndarray):
+    """Offsets of each crop's entries in ``values[sel]`` (row-major: each crop's are
+    contiguous, the crops being stacked vertically from rows y0s)."""
+    counts = np.add.reduceat(np.count_nonzero(sel, axis=1), y0s)
+    return np.concatenate([[0], np.cumsum(counts)]), counts
+
+
+def _extract_mosaic(crops, keys, rads, centre, min_object_pixels, denoise_radius,
+                    outlier_sigma, nocs_tolerance, noise_floor, edge_sigma):
+    """The per-instance steps of extract_instances on one mosaic of the crops stacked
+    vertically (in ascending order of their box radius ``rads``, each followed by at least its
+    radius in zero rows, so that no box and no difference reaches another crop): every
+    whole-image step is one numpy call for all of them (one OpenCV box filter per radius), and
+    the per-instance statistics (medians) are read from contiguous segments. Gives
+    {key: _Found} of the instances with enough usable pixels."""
+    cx, cy = centre
+    min_px = max(min_object_pixels, 3)
+    y0s, y, bands = [], 0, []
+    for cr, rad in zip(crops, rads):
+        if not bands or bands[-1][0] != rad:
+            bands.append([rad, y, y])
+        y0s.append(y)
+        y += cr.inst.shape[0] + rad
+        bands[-1][2] = y
+    hm, wm = y, max(cr.inst.shape[1] for cr in crops)
+    y0s = np.array(y0s)
+    inst = np.zeros((hm, wm), bool)
+    dc = np.zeros((hm, wm))
+    pc = np.zeros((3, hm, wm))
+    row_of = np.zeros(hm, np.intp)  # the crop of each mosaic row
+    uu = np.zeros((hm, wm))
+    vv = np.zeros((hm, 1))
+    for k, (cr, y0) in enumerate(zip(crops, y0s)):
+        hk, wk = cr.inst.shape
+        inst[y0:y0 + hk, :wk] = cr.inst
+        dc[y0:y0 + hk, :wk] = cr.dc
+        pc[:, y0:y0 + hk, :wk] = cr.pc.transpose(2, 0, 1)
+        row_of[y0:] = k
+        uu[y0:y0 + hk, :wk] = (np.arange(wk) * cr.st + cr.c0) - cx
+        vv[y0:y0 + hk, 0] = (np.arange(hk) * cr.st + cr.r0) - cy
+    # Channel by channel: numpy reductions over a length-3 axis are slow.
+    with np.errstate(invalid="ignore"):
+        ok = inst & (dc > 0) & (dc < np.inf)
+        nonzero = np.zeros_like(ok)
+        for ch in range(3):
+            v = pc[ch]
+            ok &= (v >= -nocs_tolerance) & (v <= 1 + nocs_tolerance)  # false for NaN
+            nonzero |= v != 0
+        ok &= nonzero
+    n_ok = np.add.reduceat(np.count_nonzero(ok, axis=1), y0s)
+    alive = n_ok >= min_px
+    if not alive.any():
+        return {}
+    if not alive.all():
+        ok &= alive[row_of][:, None]
+    # Planes of depth, NOCS and (later) the camera-plane points d u, d v, zero off the valid
+    # pixels: every local mean below is one box filter of a stack of them.
+    V = np.zeros((6, hm, wm))
+    np.copyto(V[0], dc, where=ok)  # not a product: invalid depth may be NaN or inf
+    np.copyto(V[1:4], pc, where=ok)
+    dz, pz = V[0], V[1:4]
+    psum = pz[0] + pz[1] + pz[2]
+    off, _ = _segments(ok, y0s)
+    dvals = dz[ok]
+    sig_d, sig_p, depth_med = np.zeros(len(crops)), np.zeros(len(crops)), np.zeros(len(crops))
+    for k, (cr, y0) in enumerate(zip(crops, y0s)):
+        if not alive[k]:
+            continue
+        hk, wk = cr.inst.shape
+        okk = ok[y0:y0 + hk, :wk]
+        sd = _second_diff_sigma(dz[y0:y0 + hk, :wk], okk)
+        # NOCS noise from the channel sum (independent channel noise adds up in variance).
+        sp = _second_diff_sigma(psum[y0:y0 + hk, :wk], okk) / np.sqrt(3.0)
+        # Below the floor the "noise" is surface curvature: treat the data as exact (no
+        # smoothing, whose curvature bias would then dominate, and no bias correction).
+        depth_med[k] = float(_median(_thin(dvals[off[k]:off[k + 1]])))
+        if sd < noise_floor * depth_med[k]:
+            sd = 0.0
+        # NOCS curvature is larger: an object spans ~200 px of ~1 NOCS unit.
+        if sp < 4 * noise_floor:
+            sp = 0.0
+        sig_d[k], sig_p[k] = sd, sp
+    md = mp = cnt = x_img = None
+    means_of = np.ones(len(crops), bool)  # per crop: md, mp, cnt are means over its ok pixels
+    denoise = np.zeros(len(crops), bool)
+    if denoise_radius > 0 or outlier_sigma > 0:
+        means, cnt = _band_means(ok, bands, V[:4])
+        md, mp = means[0], means[1:4]
+        if outlier_sigma > 0:
+            rd = np.abs(dz - md)
+            dp = pz - mp
+            rp = np.sqrt(dp[0] ** 2 + dp[1] ** 2 + dp[2] ** 2)
+            rdv, rpv = rd[ok], rp[ok]
+            thr_d, thr_p = np.full(len(crops), np.inf), np.full(len(crops), np.inf)
+            for k in np.flatnonzero(alive):
+                s = slice(off[k], off[k + 1])
+                thr_d[k] = outlier_sigma * max(MAD_TO_SIGMA * _median(_thin(rdv[s])),
+                                               1e-9 * depth_med[k])
+                thr_p[k] = outlier_sigma * max(MAD_TO_SIGMA * _median(_thin(rpv[s])), 1e-9)
+            ok2 = ok & (rd <= thr_d[row_of][:, None]) & (rp <= thr_p[row_of][:, None])
+            n2 = np.add.reduceat(np.count_nonzero(ok2, axis=1), y0s)
+            take = alive & (n2 >= min_px) & (n2 != n_ok)  # ok2 is a subset: equal iff as many
+            if take.any():
+                ok = np.where(take[row_of][:, None], ok2, ok)
+                means, cnt = _band_means(ok, bands, V[:4])
+                md, mp = means[0], means[1:4]
+        if edge_sigma > 0:
+            # Depth bleeding across object boundaries makes steep ramps: drop pixels whose
+            # (smoothed) depth gradient is far above the instance's typical gradient.
+            g = _gradient(md, ok)
+            sel = ok & (g > 0)
+            goff, gcount = _segments(sel, y0s)
+            gvals = g[sel]
+            thr_g = np.full(len(crops), np.inf)
+            has = alive & (gcount >= 8)
+            for k in np.flatnonzero(has):
+                thr_g[k] = (edge_sigma * MAD_TO_SIGMA * _median(_thin(gvals[goff[k]:goff[k + 1]]))
+                            + noise_floor * depth_med[k])
+            if has.any():
+                ok2 = ok & (g <= thr_g[row_of][:, None])
+                n2 = np.add.reduceat(np.count_nonzero(ok2, axis=1), y0s)
+                take = has & (n2 >= min_px)
+                if take.any():
+                    ok = np.where(take[row_of][:, None], ok2, ok)
+                    means_of &= ~take
+        denoise = alive & (denoise_radius > 0) & ((sig_d > 0) | (sig_p > 0))
+        if denoise.any():
+            # Average whole correspondences, not one channel: the model is affine in the
+            # camera point (d u, d v, d) and in the NOCS, so means over the same pixels stay
+            # on it, even at the border, where the window is one-sided and smoothing NOCS
+            # alone shrinks the object (a focal bias of several percent on small objects).
+            np.multiply(dz, uu, out=V[4])
+            np.multiply(dz, vv, out=V[5])
+            # Means over every crop's final pixels (for crops whose pixels did not change since
+            # the last means, the same values).
+            means, cnt = _band_means(ok, bands, V)
+            md, mp = means[0], means[1:4]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x_img = (means[4] / md, means[5] / md)
+    rr_all, cc_all = np.nonzero(ok)
+    roff, _ = _segments(ok, y0s)
+    found = {}
+    for k, (key, y0) in enumerate(zip(keys, y0s)):
+        if not alive[k]:
+            continue
+        s = slice(roff[k], roff[k + 1])
+        if s.stop - s.start < min_px:
+            continue
+        if denoise[k]:
+            found[key] = _Found(rr_all[s], cc_all[s], int(y0), md, mp, x_img, cnt,
+                                float(sig_d[k]), float(sig_p[k]))
+        else:
+            found[key] = _Found(rr_all[s], cc_all[s], int(y0), dz, pz, None, None,
+                                float(sig_d[k]), float(sig_p[k]))
+    return found

@@ -35,11 +35,11 @@ class ObjectFits:
     (O,3); quality: share of the object's 3D variance the similarity explains (1 = perfect, ~0 for
     NOCS unrelated to the shape); mirrored: the best orthogonal fit is a reflection and explains
     clearly more than the best rotation; sigma_px, sigma_depth: residual noise levels (px, m);
-    inlier_ratio: share of pixels with a Cauchy weight above 0.5; pixels: pixels used; ok: fit usable;
-    relief: the fitted object's depth relief (standard deviation of its model points' z, metres);
-    tilt: (O,2) the fitted relative depth-error gradient over the object (per standard deviation
-    of its image extent along x and y; zeros without ``depth_tilt``); tilt_chi2: its chi-square
-    (2 degrees of freedom) against zero.
+    inlier_ratio: share of pixels with a Cauchy weight above 0.5; pixels: pixels used; ok: fit
+    usable; relief: the fitted object's depth relief (standard deviation of its model points' z,
+    metres); tilt: (O,2) the fitted relative depth-error gradient over the object (per standard
+    deviation of its image extent along x and y; zeros without ``depth_tilt``); tilt_chi2: its
+    chi-square (2 degrees of freedom) against zero.
     """
 
     focal: np.ndarray
@@ -70,7 +70,8 @@ def _pad(instances, max_pixels: int, rng: np.random.Generator):
     for k, inst in enumerate(instances):
         n = len(inst.d)
         pick = rng.choice(n, m, replace=False) if n > m else np.arange(n)
-        X[k, :len(pick)], D[k, :len(pick)], P[k, :len(pick)] = inst.x[pick], inst.d[pick], inst.p[pick] - 0.5
+        k_n = len(pick)
+        X[k, :k_n], D[k, :k_n], P[k, :k_n] = inst.x[pick], inst.d[pick], inst.p[pick] - 0.5
         V[k, :len(pick)] = True
     return X, D, P, V
 
@@ -99,7 +100,9 @@ def _orthogonal_fit(P, Y, W, proper: bool):
     quality = total ** 2 / denom
     quality_proper = np.maximum(proper_total, 0) ** 2 / denom
     mirrored = (det < 0) & (quality - quality_proper > 0.2)
-    if proper:  # a rotation unless only a reflection fits (a symmetric object fits both about as well)
+    # With ``proper``: a rotation unless only a reflection fits (a symmetric object fits both
+    # about as well).
+    if proper:
         fix = np.ones_like(S)
         fix[:, 2] = np.where(mirrored, 1.0, np.sign(det))
         Q = (U * fix[:, None, :]) @ Vt
@@ -119,22 +122,29 @@ def _row_median(res, valid):
     return np.where(n > 0, med, 0.0)
 
 
-def _skew_batch(q):
-    """[q]x for q (..., 3) -> (..., 3, 3)."""
-    out = np.zeros(q.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -q[..., 2], q[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = q[..., 2], -q[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -q[..., 1], q[..., 0]
-    return out
+def _clip(v, bound: float):
+    """np.clip(v, -bound, bound) without np.clip's overhead on small arrays."""
+    return np.minimum(np.maximum(v, -bound), bound)
 
 
 def _rodrigues(w):
-    """Rotation matrices exp([w]x) for w (O,3)."""
-    th = np.sqrt(np.add.reduce(w * w, axis=-1))  # np.linalg.norm's own arithmetic
+    """Rotation matrices exp([w]x) = cos(th) I + sin(th) [k]x + (1 - cos(th)) k k^T for w (O,3),
+    th = |w|, k = w / th."""
+    th = np.sqrt(np.add.reduce(w * w, axis=-1))
     k = w / np.where(th > 0, th, 1.0)[:, None]
-    K = _skew_batch(k)
-    s, c = np.sin(th)[:, None, None], np.cos(th)[:, None, None]
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
+    s, c = np.sin(th), np.cos(th)
+    ks = k * s[:, None]
+    R = (k * (1.0 - c)[:, None])[:, :, None] * k[:, None, :]
+    R[:, 0, 0] += c
+    R[:, 1, 1] += c
+    R[:, 2, 2] += c
+    R[:, 0, 1] -= ks[:, 2]
+    R[:, 0, 2] += ks[:, 1]
+    R[:, 1, 0] += ks[:, 2]
+    R[:, 1, 2] -= ks[:, 0]
+    R[:, 2, 0] -= ks[:, 1]
+    R[:, 2, 1] += ks[:, 0]
+    return R
 
 
 def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: int = 12,
@@ -169,84 +179,101 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
     cen = (X * Vf[..., None]).sum(1) / np.maximum(Vf.sum(1), 1)[:, None]
     span = np.sqrt((((X - cen[:, None]) ** 2).sum(-1) * Vf).sum(1) / np.maximum(Vf.sum(1), 1))
     U = (X - cen[:, None]) / np.maximum(span, 1e-9)[:, None, None] * Vf[..., None]
+    # From here on component-major (O, components, M): every component is a contiguous row,
+    # the Jacobian's rows are filled by slices, and J^T W J is one batched product.
+    Xt = np.ascontiguousarray(np.swapaxes(X, 1, 2))
+    Pt = np.ascontiguousarray(np.swapaxes(P, 1, 2))
+    Ut = np.ascontiguousarray(np.swapaxes(U, 1, 2))
     tilt = np.zeros((o, 2))
     sig_px = np.full(o, 1.0)
     sig_d = np.full(o, 1e-3)
-    w_rob = W
+    w_rob = W  # zero off the valid pixels, like Vf
     lam = 1e-6
+    diag = np.arange(npar)
     H = np.zeros((o, npar, npar))
     # The Jacobian of the predictions (u, v, d) in the parameters [log f], log s, w (3), t (3),
-    # [tilt (2)]; its entries that are always zero are set once.
-    J = np.zeros((o, m, 3, npar))
-    r = np.empty((o, m, 3))  # residuals of u, v, d
+    # [tilt (2)], parameter-major (O, npar, 3, M); its entries that are always zero are set once.
+    J = np.zeros((o, npar, 3, m))
+    Jf = J.reshape(o, npar, 3 * m)
+    r = np.empty((o, 3, m))  # residuals of u, v, d
+    k0 = 0 if fix_focal else 1
     for it in range(iterations):
         f = np.exp(logf)
-        q = np.exp(logs)[:, None, None] * (P @ np.swapaxes(Rm, 1, 2))
-        Xc = q + t[:, None]
-        z = np.where(np.abs(Xc[..., 2]) > 1e-9, Xc[..., 2], 1e-9)
-        uh = f[:, None] * Xc[..., 0] / z
-        vh = f[:, None] * Xc[..., 1] / z
-        gain = 1.0 + (U[..., 0] * tilt[:, 0, None] + U[..., 1] * tilt[:, 1, None])
-        np.subtract(X[..., 0], uh, out=r[..., 0])
-        np.subtract(X[..., 1], vh, out=r[..., 1])
-        np.subtract(D, Xc[..., 2] * gain, out=r[..., 2])
-        r_px = r[..., 0] ** 2 + r[..., 1] ** 2
-        r_d = r[..., 2] ** 2
+        q = (Rm * np.exp(logs)[:, None, None]) @ Pt  # s R (p - 0.5), (O, 3, M)
+        Xc = q + t[..., None]
+        zc = Xc[:, 2]
+        z = np.where(np.abs(zc) > 1e-9, zc, 1e-9)
+        iz = 1.0 / z
+        uvh = Xc[:, :2] * (f[:, None] * iz)[:, None]  # predicted u, v
+        gain = 1.0 + (Ut[:, 0] * tilt[:, 0, None] + Ut[:, 1] * tilt[:, 1, None])
+        np.subtract(Xt, uvh, out=r[:, :2])
+        np.subtract(D, zc * gain, out=r[:, 2])
+        r2 = r * r
         # Noise levels from the robustly weighted residuals (with floors: exact data stay finite).
-        wsum = np.maximum((w_rob * Vf).sum(1), 1e-300)
-        sig_px = np.sqrt(np.maximum((r_px * w_rob).sum(1) / (2 * wsum), (1e-6) ** 2))
-        sig_d = np.sqrt(np.maximum((r_d * w_rob).sum(1) / wsum, (1e-7 * t[:, 2]) ** 2))
-        e = np.sqrt(r_px / sig_px[:, None] ** 2 / 2 + r_d / sig_d[:, None] ** 2)
-        w_rob = Vf / (1.0 + (e / _CAUCHY) ** 2)
+        wsum = np.maximum(w_rob.sum(1), 1e-300)
+        ss = (r2 @ w_rob[..., None])[..., 0]  # (O, 3) weighted sums of squares
+        sig_px = np.sqrt(np.maximum((ss[:, 0] + ss[:, 1]) / (2 * wsum), (1e-6) ** 2))
+        sig_d = np.sqrt(np.maximum(ss[:, 2] / wsum, (1e-7 * t[:, 2]) ** 2))
+        e2_w = np.empty((o, 1, 3))  # r2 -> (e / c)^2: 1 / (2 sigma_px^2 c^2) and 1 / (sigma_d c)^2
+        e2_w[:, 0, 0] = 0.5 / _CAUCHY ** 2 / sig_px ** 2
+        e2_w[:, 0, 1] = e2_w[:, 0, 0]
+        e2_w[:, 0, 2] = 1.0 / _CAUCHY ** 2 / sig_d ** 2
+        e2 = e2_w @ r2
+        w_rob = Vf / (1.0 + e2[:, 0])
         if it == iterations - 1:
             break
-        # d(prediction)/dX rows for u, v, d times dX/d(log s, w, t) = [q, -[q]x, I], written
-        # out per entry (small batched matrix products are slow in numpy), with uz = u/z,
-        # vz = v/z and the zero and unit entries of [q, -[q]x, I] multiplied out.
-        qx, qy, qz = q[..., 0], q[..., 1], q[..., 2]
-        a = f[:, None] / z
-        uz, vz = uh / z, vh / z
-        k0 = 0 if fix_focal else 1
+        # The Jacobian is formed already scaled by the square roots of the row weights
+        # w_rob / sigma^2 (su for u and v, sd for d), folded into the factors it is built from,
+        # so that J^T W J and J^T W r are plain products, without a weighted copy.
+        sw = np.sqrt(w_rob)
+        su = sw * (1.0 / sig_px)[:, None]
+        sd = sw * (1.0 / sig_d)[:, None]
+        # d(prediction)/dX rows for u, v, d times dX/d(log s, w, t) = [q, -[q]x, I], with
+        # a = f/z, (uz, vz) = (u, v)/z and the zero and unit entries multiplied out.
+        a = f[:, None] * iz * su
+        aq = q * a[:, None]  # a qx, a qy, a qz
+        uvz = uvh * (iz * su)[:, None]  # uz, vz
+        B = uvz[:, :, None] * q[:, None]  # (O, 2, 3, M): [uz, vz] x [qx, qy, qz]
+        gs = gain * sd
+        gq = q * gs[:, None]
         if not fix_focal:
-            J[..., 0, 0], J[..., 1, 0] = uh, vh
-        Ju, Jv, Jd = J[..., 0, k0:k0 + 7], J[..., 1, k0:k0 + 7], J[..., 2, k0:k0 + 7]
-        Ju[..., 0] = a * qx - uz * qz
-        Ju[..., 1] = -(uz * qy)
-        Ju[..., 2] = a * qz + uz * qx
-        Ju[..., 3] = -(a * qy)
-        Ju[..., 4] = a
-        Ju[..., 6] = -uz
-        Jv[..., 0] = a * qy - vz * qz
-        Jv[..., 1] = a * -qz - vz * qy
-        Jv[..., 2] = vz * qx
-        Jv[..., 3] = a * qx
-        Jv[..., 5] = a
-        Jv[..., 6] = -vz
-        Jd[..., 0] = gain * qz
-        Jd[..., 1] = gain * qy
-        Jd[..., 2] = -(gain * qx)
-        Jd[..., 6] = gain
+            np.multiply(uvh, su[:, None], out=J[:, 0, :2])
+        np.subtract(aq[:, :2], B[:, :, 2], out=J[:, k0, :2])  # log s
+        J[:, k0, 2] = gq[:, 2]
+        np.negative(B[:, :, 1], out=J[:, k0 + 1, :2])  # w_x
+        J[:, k0 + 1, 1] -= aq[:, 2]
+        J[:, k0 + 1, 2] = gq[:, 1]
+        J[:, k0 + 2, :2] = B[:, :, 0]  # w_y
+        J[:, k0 + 2, 0] += aq[:, 2]
+        np.negative(gq[:, 0], out=J[:, k0 + 2, 2])
+        np.negative(aq[:, 1], out=J[:, k0 + 3, 0])  # w_z
+        J[:, k0 + 3, 1] = aq[:, 0]
+        J[:, k0 + 4, 0] = a  # t
+        J[:, k0 + 5, 1] = a
+        np.negative(uvz, out=J[:, k0 + 6, :2])
+        J[:, k0 + 6, 2] = gs
         if depth_tilt:
-            J[..., 2, k0 + 7:] = z[..., None] * U
-        wr = w_rob[..., None] / np.stack([sig_px, sig_px, sig_d], -1)[:, None, :] ** 2  # (O,M,3)
-        Jr = J.reshape(o, 3 * m, npar)
-        Jw = Jr * wr.reshape(o, 3 * m, 1)
-        H = np.swapaxes(Jw, 1, 2) @ Jr
-        g = (np.swapaxes(Jw, 1, 2) @ r.reshape(o, 3 * m, 1))[..., 0]
-        Hd = H + lam * np.eye(npar) * np.maximum(np.diagonal(H, axis1=1, axis2=2), 1e-12)[:, None, :]
+            np.multiply(Ut, (z * sd)[:, None], out=J[:, k0 + 7:, 2])
+        rs = np.empty_like(r)  # the residuals scaled alike
+        np.multiply(r[:, :2], su[:, None], out=rs[:, :2])
+        np.multiply(r[:, 2], sd, out=rs[:, 2])
+        H = Jf @ np.swapaxes(Jf, 1, 2)
+        g = (Jf @ rs.reshape(o, 3 * m, 1))[..., 0]
+        Hd = H.copy()
+        Hd[:, diag, diag] += lam * np.maximum(H[:, diag, diag], 1e-12)
         try:
             step = np.linalg.solve(Hd, g[..., None])[..., 0]
         except np.linalg.LinAlgError:
             break
         step = np.where(np.isfinite(step), step, 0.0)
         if not fix_focal:
-            logf = logf + np.clip(step[:, 0], -0.3, 0.3)
+            logf = logf + _clip(step[:, 0], 0.3)
             step = step[:, 1:]
-        logs = logs + np.clip(step[:, 0], -0.3, 0.3)
-        Rm = _rodrigues(np.clip(step[:, 1:4], -0.5, 0.5)) @ Rm
+        logs = logs + _clip(step[:, 0], 0.3)
+        Rm = _rodrigues(_clip(step[:, 1:4], 0.5)) @ Rm
         t = t + step[:, 4:7]
         if depth_tilt:
-            tilt = tilt + np.clip(step[:, 7:9], -0.05, 0.05)
+            tilt = tilt + _clip(step[:, 7:9], 0.05)
     with np.errstate(all="ignore"):
         try:
             cov = np.linalg.inv(H)
@@ -259,10 +286,12 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
         with np.errstate(all="ignore"):
             tilt_chi2 = np.einsum("oi,oij,oj->o", tilt, np.linalg.pinv(ct), tilt)
     var = np.where(np.isfinite(var) & (var > 0), var, np.inf)
-    ok = np.isfinite(logf) & np.isfinite(logs) & np.all(np.isfinite(t), -1) & (t[:, 2] > 0) & (V.sum(1) >= 6)
-    qz = q[..., 2]
+    ok = (np.isfinite(logf) & np.isfinite(logs) & np.all(np.isfinite(t), -1) & (t[:, 2] > 0)
+          & (V.sum(1) >= 6))
+    qz = q[:, 2]
     mz = (qz * Vf).sum(1) / np.maximum(Vf.sum(1), 1)
     relief = np.sqrt((((qz - mz[:, None]) ** 2) * Vf).sum(1) / np.maximum(Vf.sum(1), 1))
     return ObjectFits(np.exp(logf), var, np.exp(logs), Rm, t, quality, mirrored, sig_px, sig_d,
-                      (w_rob > 0.5 * Vf).sum(1) / np.maximum(V.sum(1), 1), V.sum(1), ok, relief, tilt,
+                      (w_rob > 0.5 * Vf).sum(1) / np.maximum(V.sum(1), 1), V.sum(1), ok, relief,
+                      tilt,
                       np.where(np.isfinite(tilt_chi2), tilt_chi2, 0.0))

@@ -77,7 +77,8 @@ class ObjectPose:
 
 
 def rotation_angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
-    """Geodesic angle between two rotations in degrees, from ||Ra - Rb||_F = 2 sqrt(2) sin(angle/2):
-    accurate for tiny angles too, unlike arccos of the trace."""
+    """Geodesic angle between two rotations in degrees, from
+    ||Ra - Rb||_F = 2 sqrt(2) sin(angle/2): accurate for tiny angles too, unlike arccos of the
+    trace."""
     s = np.linalg.norm(np.asarray(Ra) - np.asarray(Rb)) / (2.0 * np.sqrt(2.0))
     return float(np.degrees(2.0 * np.arcsin(np.clip(s, 0.0, 1.0))))

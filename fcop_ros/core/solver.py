@@ -40,7 +40,8 @@ def solve_triplets(x: np.ndarray, d: np.ndarray, p: np.ndarray, triplets: np.nda
     p = np.asarray(p, dtype=np.float64)
     tri = np.asarray(triplets, dtype=np.intp).reshape(-1, 3)
     if x.ndim != 2 or x.shape[1] != 2 or d.shape != (x.shape[0],) or p.shape != (x.shape[0], 3):
-        raise ValueError(f"solve_triplets expects x (N,2), d (N,), p (N,3); got {x.shape}, {d.shape}, {p.shape}")
+        raise ValueError(f"solve_triplets expects x (N,2), d (N,), p (N,3); got {x.shape}, "
+                         f"{d.shape}, {p.shape}")
     if tri.size and (tri.min() < 0 or tri.max() >= x.shape[0]):
         raise ValueError("solve_triplets: triplet index out of range")
 
