@@ -23,7 +23,7 @@ Conventions and choices:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -38,7 +38,8 @@ class Instance:
     """Correspondences of one instance.
 
     instance_id: mask value; x (n,2) px relative to the principal point; d (n,) metres; p (n,3)
-    NOCS in [0,1]; var_d (n,) estimated noise variance of d (m^2) after denoising; sigma_d and
+    NOCS in [0,1]; var_d (n,) and var_p (n,) estimated noise variances of d (m^2) and of each
+    NOCS coordinate after denoising; sigma_d and
     sigma_p: estimated per-pixel noise of the raw depth (m) and NOCS; mask_pixels: pixels of
     the instance in the mask; valid_pixels: usable pixels before subsampling.
     """
@@ -52,6 +53,7 @@ class Instance:
     sigma_p: float
     mask_pixels: int
     valid_pixels: int
+    var_p: np.ndarray | None = None
 
 
 class InstanceList(list):
@@ -287,12 +289,14 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
             x = np.column_stack([cc * cr.st + cr.c0 - cx,
                                  (rr - y0) * cr.st + cr.r0 - cy]).astype(np.float64)
             var_d = np.full(rr.size, res.sigma_d ** 2)
+            var_p = np.full(rr.size, res.sigma_p ** 2)
         else:
             x = np.column_stack([res.x_img[0][rr, cc], res.x_img[1][rr, cc]])
             var_d = res.sigma_d ** 2 / np.maximum(res.cnt[rr, cc], 1.0)
+            var_p = res.sigma_p ** 2 / np.maximum(res.cnt[rr, cc], 1.0)
         out.append(Instance(cr.iid, x, res.dz[rr, cc].astype(np.float64, copy=False),
                             np.ascontiguousarray(res.pz[:, rr, cc].T), var_d, res.sigma_d,
-                            res.sigma_p, cr.npix, int(valid)))
+                            res.sigma_p, cr.npix, int(valid), var_p))
     return out
 
 
@@ -388,7 +392,6 @@ def _extract_mosaic(crops, keys, rads, centre, min_object_pixels, denoise_radius
     np.copyto(V[0], dc, where=ok)  # not a product: invalid depth may be NaN or inf
     np.copyto(V[1:4], pc, where=ok)
     dz, pz = V[0], V[1:4]
-    psum = pz[0] + pz[1] + pz[2]
     off, _ = _segments(ok, y0s)
     dvals = dz[ok]
     sig_d, sig_p, depth_med = np.zeros(len(crops)), np.zeros(len(crops)), np.zeros(len(crops))
@@ -398,8 +401,9 @@ def _extract_mosaic(crops, keys, rads, centre, min_object_pixels, denoise_radius
         hk, wk = cr.inst.shape
         okk = ok[y0:y0 + hk, :wk]
         sd = _second_diff_sigma(dz[y0:y0 + hk, :wk], okk)
-        # NOCS noise from the channel sum (independent channel noise adds up in variance).
-        sp = _second_diff_sigma(psum[y0:y0 + hk, :wk], okk) / np.sqrt(3.0)
+        # NOCS noise, the RMS over the channels: the same for a mirrored or permuted NOCS.
+        sp = float(np.sqrt(np.mean([_second_diff_sigma(pz[c, y0:y0 + hk, :wk], okk) ** 2
+                                    for c in range(3)])))
         # Below the floor the "noise" is surface curvature: treat the data as exact (no
         # smoothing, whose curvature bias would then dominate, and no bias correction).
         depth_med[k] = float(_median(_thin(dvals[off[k]:off[k + 1]])))
@@ -482,3 +486,22 @@ def _extract_mosaic(crops, keys, rads, centre, min_object_pixels, denoise_radius
             found[key] = _Found(rr_all[s], cc_all[s], int(y0), dz, pz, None, None,
                                 float(sig_d[k]), float(sig_p[k]))
     return found
+
+
+def calibrated_nocs(inst: Instance) -> Instance:
+    """The instance with its NOCS replaced by their expectation given the noise left after
+    denoising (regression calibration): noise in the NOCS, the fit's regressor, would otherwise
+    shrink the fitted similarity along the object's thin axes, like a shape error."""
+    if inst.var_p is None or len(inst.p) < 4:
+        return inst
+    noise = float(np.mean(inst.var_p))
+    if not noise > 0:
+        return inst
+    centre = inst.p.mean(0)
+    q = inst.p - centre
+    cov = q.T @ q / len(q)
+    val, vec = np.linalg.eigh(cov)
+    gain = np.clip(val - noise, 0.0, None) / np.maximum(val, 1e-300)
+    p = centre + ((q @ vec) * gain) @ vec.T
+    return replace(inst, p=p)
+

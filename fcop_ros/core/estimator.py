@@ -18,7 +18,7 @@ import numpy as np
 
 from .combine import random_effects
 from .camera import image_centre
-from .correspondences import Instance, check_images, extract_instances
+from .correspondences import Instance, calibrated_nocs, check_images, extract_instances
 from .object_fit import fit_objects
 from .pose import ObjectPose, umeyama
 from .solver import sample_triplets, solve_triplets
@@ -278,7 +278,7 @@ def estimate_focal(
     est.focal_votes = f0
     if not opt.refine:
         return _finish(est, f0, None, instances, opt, rng, poses)
-    support = list(instances)
+    support = [calibrated_nocs(inst) for inst in instances]
     seed = int(rng.integers(2**32))
     fits = fit_objects(
         support,
