@@ -36,6 +36,8 @@ import time
 
 import numpy as np
 
+from fcop_ros.ros.spin import spin_until
+
 
 def rss_mb() -> float:
     with open("/proc/self/status") as fh:
@@ -59,15 +61,6 @@ def ros_context():
     finally:
         executor.shutdown(timeout_sec=1.0)
         ctx.try_shutdown()
-
-
-def spin_until(executor, condition, timeout: float, step: float = 0.02) -> bool:
-    """Spin until ``condition()`` holds or the deadline passes (the test harness's loop; the
-    benchmark keeps its own copy rather than reaching into test/)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and not condition():
-        executor.spin_once(timeout_sec=step)
-    return bool(condition())
 
 
 def frame_messages(frame):
