@@ -32,7 +32,6 @@ from fcop_ros.synthetic.world import WORLD_PRESETS, ZERO_MEAN_FAMILIES, world_fr
 from peers import p4pf
 
 
-
 def plain_reference(fr, rng):
     """The accuracy issue's plain reference: 7x7 masked box means of depth and NOCS inside each
     instance, 2 px erosion, triplets with well-separated NOCS among random candidates, interval

@@ -403,6 +403,7 @@ def test_diagnostics_error_when_the_estimator_stalls_and_warn_when_behind(
         for k in range(1, 11):
             h.send(frame_messages(cam(k), T0 + k * DT))
             assert spin_until(h.ex, lambda: h.node.received == 3 * (k + 1), 10)
+
         # The first message built after all ten frames were in (one built earlier has fewer drops).
         def after_all(m):
             return {kv.key: kv.value for kv in m.status[0].values}.get(

@@ -27,7 +27,6 @@ T0 = 1_700_000_000_000_000_000
 DT = 33_333_333
 
 
-
 def shipped_with(tmp_path, **changes):
     """config/fcop.yaml as shipped (keyed /**), with some values changed."""
     text = open(CONFIG).read()

@@ -22,7 +22,6 @@ T0 = 1_700_000_000_000_000_000
 DT = 33_333_333
 
 
-
 def values(status):
     return {kv.key: kv.value for kv in status.values}
 

@@ -250,7 +250,7 @@ def test_play_mode_timing_and_order(tmp_path):
 
 @pytest.mark.parametrize("key",
                          [("/**",), ("fcop_node",), ("/**/fcop_node",), ("/camera/fcop_node",),
-                                 ("robot", "fcop_node")])
+                          ("robot", "fcop_node")])
 def test_params_file_applies_whatever_the_namespace(tmp_path, key):
     """The replayed node runs in /fcop; a file written for the user's fcop_node (at the root, under
     a namespace, nested, or for any node) still sets its parameters, and -p comes after it."""

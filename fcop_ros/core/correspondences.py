@@ -504,4 +504,3 @@ def calibrated_nocs(inst: Instance) -> Instance:
     gain = np.clip(val - noise, 0.0, None) / np.maximum(val, 1e-300)
     p = centre + ((q @ vec) * gain) @ vec.T
     return replace(inst, p=p)
-
