@@ -162,6 +162,10 @@ class TestBadInput:
             EstimatorOptions(focal_range=(100, 10))
         with pytest.raises(ValueError, match="noise bound"):
             NoiseBound(0.8, "relative")
+        with pytest.raises(TypeError, match="options=EstimatorOptions"):
+            estimate_focal(self.depth, self.nocs, self.mask, EstimatorOptions())
+        with pytest.raises(TypeError, match="options=EstimatorOptions"):
+            estimate_focal(self.depth, self.nocs, self.mask, options={"refine": False})
 
     @pytest.mark.parametrize("case", sorted(BAD_CASES))
     def test_no_evidence_gives_none(self, case):

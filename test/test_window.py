@@ -135,6 +135,8 @@ def test_invalid_settings_are_refused():
         FocalWindow(WindowOptions(max_age=-1))
     with pytest.raises(ValueError):
         FocalWindow(WindowOptions(change_threshold=0))
+    with pytest.raises(TypeError, match="WindowOptions"):
+        FocalWindow(30)
 
 
 def test_wild_frames_are_judged_by_the_frames_own_spread():

@@ -203,6 +203,8 @@ def estimate_focal(
     made-up number. Mismatched or malformed images raise ValueError.
     """
     opt = EstimatorOptions() if options is None else options
+    if not isinstance(opt, EstimatorOptions) or isinstance(principal_point, EstimatorOptions):
+        raise TypeError("estimate_focal takes its settings as options=EstimatorOptions(...)")
     depth, nocs, mask = check_images(depth, nocs, mask)
     h, w = depth.shape
     pp = (

@@ -74,6 +74,9 @@ class FocalWindow:
 
     def __init__(self, options: WindowOptions | None = None):
         self.options = WindowOptions() if options is None else options
+        if not isinstance(self.options, WindowOptions):
+            raise TypeError("FocalWindow takes a WindowOptions, e.g. "
+                            "FocalWindow(WindowOptions(max_frames=30))")
         self._frames: deque[_Frame] = deque()
         self.current = WindowEstimate(None, reason="no frames yet")
         self.changes = 0
