@@ -29,14 +29,13 @@ estimator thread (a diagnostic: the node leaves the interpreter's setting alone)
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import sys
 import time
 
 import numpy as np
 
-from fcop_ros.ros.spin import spin_until
+from fcop_ros.ros.spin import ros_context, spin_until
 
 
 def rss_mb() -> float:
@@ -45,22 +44,6 @@ def rss_mb() -> float:
             if line.startswith("VmRSS:"):
                 return int(line.split()[1]) / 1024
     return float("nan")
-
-
-@contextlib.contextmanager
-def ros_context():
-    """A private, initialised Context and a SingleThreadedExecutor on it; both shut down after."""
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    ctx = Context()
-    rclpy.init(context=ctx)
-    executor = SingleThreadedExecutor(context=ctx)
-    try:
-        yield ctx, executor
-    finally:
-        executor.shutdown(timeout_sec=1.0)
-        ctx.try_shutdown()
 
 
 def frame_messages(frame):

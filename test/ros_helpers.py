@@ -1,38 +1,21 @@
 """In-process ROS 2 test harness: a private Context and executor per test, spin with a deadline."""
 from __future__ import annotations
 
-import contextlib
 import threading
 
 import numpy as np
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import MarkerArray
 
-from fcop_ros.ros.spin import spin_until  # noqa: F401 (re-exported for the tests)
+from fcop_ros.ros.spin import ros_context, spin_until  # noqa: F401 (re-exported for the tests)
 from msg_adapters import (  # noqa: F401 (stamp_ns re-exported for the tests)
     depth_to_image, header_from_ns, mask_to_image, nocs_to_image, stamp_ns)
 
 FRAME_ID = "camera_optical_frame"
-
-
-@contextlib.contextmanager
-def ros_context(args=None):
-    """A private, initialised Context and a SingleThreadedExecutor on it; both shut down after."""
-    ctx = Context()
-    rclpy.init(args=args, context=ctx)
-    executor = SingleThreadedExecutor(context=ctx)
-    try:
-        yield ctx, executor
-    finally:
-        executor.shutdown(timeout_sec=1.0)
-        ctx.try_shutdown()
 
 
 def frame_messages(frame, stamp: int, depth_encoding="32FC1", nocs_encoding="32FC3",
