@@ -99,7 +99,7 @@ class FocalWindow:
             self._frames.clear()
         ok = estimate.focal is not None and estimate.std_rel is not None and estimate.std_rel > 0
         var = float(estimate.std_rel) ** 2 if ok else np.inf
-        noise = getattr(estimate, "std_rel_noise", None)
+        noise = estimate.std_rel_noise
         noise = min(float(noise) ** 2, var) if ok and noise is not None and noise > 0 else var
         self._frames.append(
             _Frame(
@@ -171,9 +171,8 @@ class FocalWindow:
         return True
 
     def _estimate(self) -> WindowEstimate:
-        frames = list(self._frames)
         rated, y, v, noise = self._rated()
-        n_all = len(frames)
+        n_all = len(self._frames)
         support = int(sum(f.support for f in rated))
         if y.size < self.options.min_frames:
             return WindowEstimate(
