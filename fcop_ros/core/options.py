@@ -15,6 +15,7 @@ import numpy as np
 from .stabbing import focal_intervals
 
 BOUND_MODES = ("relative", "absolute")
+MAX_RELATIVE_BOUND = 0.5  # a relative noise bound is a fraction of f up to this
 METHODS = ("stabbing", "ransac")
 
 
@@ -29,9 +30,11 @@ class NoiseBound:
     def __post_init__(self):
         if self.mode not in BOUND_MODES:
             raise ValueError(f"noise bound mode must be one of {BOUND_MODES}, got {self.mode!r}")
-        if not self.value > 0 or (self.mode == "relative" and not self.value <= 0.5):
+        too_wide = self.mode == "relative" and not self.value <= MAX_RELATIVE_BOUND
+        if not self.value > 0 or too_wide:
             raise ValueError(
-                f"noise bound must be > 0 (a fraction <= 0.5 when relative), got {self.value}"
+                f"noise bound must be > 0 (a fraction <= {MAX_RELATIVE_BOUND} when relative), "
+                f"got {self.value}"
             )
 
     @property

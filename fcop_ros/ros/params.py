@@ -14,7 +14,13 @@ from dataclasses import dataclass
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
-from ..core.options import BOUND_MODES, EstimatorOptions, NoiseBound, WindowOptions
+from ..core.options import (
+    BOUND_MODES,
+    MAX_RELATIVE_BOUND,
+    EstimatorOptions,
+    NoiseBound,
+    WindowOptions,
+)
 
 NOCS_CONVENTIONS = ("fcop", "nocs_dataset")
 # The estimator's and the window's defaults, written once (in fcop_ros/core/options.py).
@@ -286,10 +292,10 @@ def check_combination(p: dict, image_size=None) -> str:
             f"parameter focal_min={p['focal_min']} is not allowed: it must be below "
             f"focal_max={p['focal_max']}"
         )
-    if p["noise_bound_mode"] == "relative" and not 0 < p["noise_bound"] <= 0.5:
+    if p["noise_bound_mode"] == "relative" and not 0 < p["noise_bound"] <= MAX_RELATIVE_BOUND:
         return (
-            f"parameter noise_bound={p['noise_bound']} is not allowed: a fraction in (0, 0.5] in "
-            f"relative noise_bound_mode"
+            f"parameter noise_bound={p['noise_bound']} is not allowed: a fraction in "
+            f"(0, {MAX_RELATIVE_BOUND}] in relative noise_bound_mode"
         )
     if image_size is not None:
         for axis, size in (("x", image_size[0]), ("y", image_size[1])):
