@@ -23,7 +23,7 @@ setup(
         ("share/" + package_name + "/launch", sorted(glob.glob("launch/*.launch.py"))),
     ],
     python_requires=">=3.10",
-    install_requires=["numpy", "scipy", "opencv-python-headless", "rosbags>=0.10", "mcap",
+    install_requires=["numpy", "scipy", "opencv-python-headless", "numba", "rosbags>=0.10", "mcap",
                       "matplotlib", "tqdm", "pyyaml"],
     extras_require={
         "kilted": ["ros-" + p for p in _ROS_PACKAGES],

@@ -1,0 +1,66 @@
+"""Compiled kernels: the core's per-pixel loops as numba functions, with numpy as the fallback.
+
+Where numba is installed (a pip requirement; rosdep key python3-numba) and the environment
+variable FCOP_NUMBA is not 0, the modules of the core call their ``@kernel`` functions; else
+they run the numpy code each kernel replaces, which stays beside it. Both give the same
+results up to rounding (the tests compare them on the same frames). Kernels compile on first
+use (a few seconds; ``warm_up`` does it ahead), are cached on disk, and release the GIL, so
+the node's executor thread runs while the estimator thread computes.
+"""
+from __future__ import annotations
+
+import os
+
+try:
+    import numba
+except ImportError:  # the numpy paths serve
+    numba = None
+
+#: Whether the core calls its compiled kernels (read at call time: tests switch it off).
+ENABLED = numba is not None and os.environ.get("FCOP_NUMBA", "1").strip().lower() not in (
+    "0", "false", "no", "off")
+
+
+#: Every kernel defined, for ``warm_up``'s check that it reached them all.
+KERNELS: list = []
+
+
+def kernel(fn):
+    """Compile ``fn`` with numba (lazily, cached, without the GIL) when numba is installed;
+    without numba ``fn`` is returned as it is and its module uses its numpy path instead."""
+    if numba is None:
+        return fn
+    compiled_fn = numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    KERNELS.append(compiled_fn)
+    return compiled_fn
+
+
+def warm_up() -> float:
+    """Compile (or load from the cache) every kernel by estimating one small synthetic frame;
+    returns the seconds it took. A no-op when the kernels are not used."""
+    import time
+
+    import numpy as np
+
+    if not ENABLED:
+        return 0.0
+    from .estimator import estimate_focal
+
+    t = time.perf_counter()
+    h, w, f = 120, 160, 150.0
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    depth = 1.0 + 0.002 * xx + 0.001 * yy
+    mask = np.zeros((h, w), np.int32)
+    mask[20:70, 20:70] = 1
+    mask[60:110, 90:150] = 2
+    # Two tilted planes seen through the camera, each one's points scaled into the unit cube
+    # as its NOCS.
+    X = np.stack([(xx - w / 2) * depth / f, (yy - h / 2) * depth / f, depth], -1)
+    nocs = np.zeros_like(X)
+    for k in (1, 2):
+        Xk = X[mask == k] - X[mask == k].mean(0)
+        nocs[mask == k] = 0.5 + Xk / (2.2 * np.abs(Xk).max())
+    est = estimate_focal(depth, nocs, mask, seed=0)
+    if est.focal is None:
+        raise RuntimeError(f"compiled.warm_up: the warm-up frame gave no focal ({est.reason})")
+    return time.perf_counter() - t
