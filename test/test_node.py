@@ -12,6 +12,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
+from fcop_ros.core import compiled
 from fcop_ros.core.pose import rotation_angle_deg
 from fcop_ros.synthetic.scenes import (BAD_CASES, camera_frame as cam, camera_frames, clean_frame,
                                        corrupted)
@@ -219,6 +220,22 @@ def test_diagnostics(harness):
     for key in ("window_fill", "frame_rate_hz", "estimator_rate_hz", "estimate_age_s",
                 "sync_dropped", "processing_ms_median", "frames_skipped", "camera_info_published"):
         assert key in v, key
+    assert v["estimator_kernels"] == compiled.describe() and v["estimator_kernels"]
+
+
+def test_kernels_that_fail_to_build_leave_the_numpy_estimator(harness, monkeypatch):
+    """A compiler failure at start-up is logged and the node estimates with numpy instead."""
+    def broken():
+        raise RuntimeError("no LLVM here")
+
+    monkeypatch.setattr(compiled, "ENABLED", True)
+    monkeypatch.setattr(compiled, "warm_up", broken)
+    h = harness()
+    fr = clean_frame(2)
+    assert h.frame(frame_messages(fr, T0))
+    assert not compiled.ENABLED
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 10)
+    assert abs(h.info.msgs[0].k[0] / fr.focal - 1) < 1e-3
 
 
 def test_mixed_encodings_work(harness):

@@ -174,6 +174,29 @@ def test_worker_survives_a_failing_item_and_reports_it():
     assert not w._thread.is_alive()
 
 
+def test_worker_runs_before_once_ahead_of_the_first_item():
+    order = []
+    warmed = threading.Event()
+
+    def before():
+        assert warmed.wait(10)  # items put meanwhile wait in the slot
+        order.append("before")
+
+    w = LatestSlotWorker(lambda item, g: order.append(item), on_error=lambda item, exc: None,
+                         before=before)
+    w.start()
+    try:
+        w.put(1)
+        w.put(2)
+        warmed.set()
+        assert _wait(lambda: w.processed == 1 and w.idle())
+        w.put(3)
+        assert _wait(lambda: w.processed == 2 and w.idle())
+        assert order == ["before", 2, 3]
+    finally:
+        w.stop()
+
+
 # ----- the diagnostics builder
 
 

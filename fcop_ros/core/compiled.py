@@ -21,6 +21,13 @@ ENABLED = numba is not None and os.environ.get("FCOP_NUMBA", "1").strip().lower(
     "0", "false", "no", "off")
 
 
+def describe() -> str:
+    """What runs the kernels, for logs and diagnostics."""
+    if ENABLED:
+        return f"numba {numba.__version__}"
+    return "numpy (numba not installed)" if numba is None else "numpy (compiled kernels off)"
+
+
 #: Every kernel defined, for ``warm_up``'s check that it reached them all.
 KERNELS: list = []
 

@@ -22,7 +22,8 @@ class DiagnosticsInput:
     """One reading of the node. ``window``: the window's current WindowEstimate; ``publishable``:
     whether its focal is within max_uncertainty (CameraInfo goes out); ``busy_for`` / ``age``:
     seconds the estimator has been busy with one frame / since it finished the last (None: idle /
-    never); ``processing_ms``: recent per-frame estimation times."""
+    never); ``processing_ms``: recent per-frame estimation times; ``kernels``: what runs the
+    estimator's kernels (numba or the numpy fallback)."""
 
     now: float
     window: object
@@ -40,6 +41,7 @@ class DiagnosticsInput:
     processing_ms: tuple = ()
     rejected: dict = field(default_factory=dict)
     warnings: dict = field(default_factory=dict)
+    kernels: str = ""
 
 
 @dataclass(frozen=True)
@@ -123,6 +125,7 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         "sync_dropped": str(d.sync_dropped),
         "processing_ms_median": f"{np.median(times):.2f}",
         "processing_ms_max": f"{np.max(times):.2f}",
+        "estimator_kernels": d.kernels,
     }
     values.update({f"rejected_{k}": str(v) for k, v in sorted(d.rejected.items())})
     values.update({f"warning_{k}": str(v) for k, v in sorted(d.warnings.items())})

@@ -53,7 +53,7 @@ from msg_adapters import (
     stamp_ns,
 )
 
-from ..core import FocalWindow, estimate_focal, estimate_poses
+from ..core import FocalWindow, compiled, estimate_focal, estimate_poses
 from ..core.camera import image_centre
 from .calibration import default_calibration_path, write_calibration
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
@@ -171,6 +171,7 @@ class FcopNode(Node):
             self._on_worker_error,
             now=lambda: self._now(),
             name="fcop_estimator",
+            before=self._warm_up_kernels,
         )
         self._size = None  # (width, height) of the frames in the window
         self._estimate: _Publishable | None = None
@@ -513,6 +514,23 @@ class FcopNode(Node):
         stamp, msgs = item
         self.process(stamp, msgs, generation)
 
+    def _warm_up_kernels(self) -> None:
+        """Compile the estimator's kernels (or load them from numba's cache) before the first
+        frame; where they cannot be compiled, the numpy paths serve."""
+        try:
+            seconds = compiled.warm_up()
+        except Exception as exc:  # noqa: BLE001 - any compiler failure leaves numpy working
+            compiled.ENABLED = False
+            self.get_logger().warning(
+                f"fcop_node: the compiled kernels failed to build ({exc!r}); estimating with "
+                "numpy, several times slower"
+            )
+        else:
+            if compiled.ENABLED:
+                self.get_logger().info(
+                    f"fcop_node: estimator kernels ready ({compiled.describe()}, {seconds:.1f} s)"
+                )
+
     def _on_worker_error(self, item, exc: Exception) -> None:
         """The node must outlive any single bad frame: count it and say which."""
         self._reject("exception")
@@ -775,6 +793,7 @@ class FcopNode(Node):
                 processing_ms=tuple(t * 1000 for t in self._proc_times),
                 rejected=dict(self.rejected),
                 warnings=dict(self.warnings),
+                kernels=compiled.describe(),
             )
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped)
         return diagnostic_status(

@@ -32,6 +32,8 @@ class LatestSlotWorker:
     ``generation`` counts :meth:`clear` calls: the handler compares it with :attr:`generation` to
     discard work on an item taken before a reset. ``on_error(item, exc)`` is called when the
     handler raises (the worker carries on). ``now``: the clock of ``busy_since`` and ``last_done``.
+    ``before``: run once on the thread before the first item is taken (e.g. a warm-up whose
+    seconds no item should wait for on the producer's side); items put meanwhile wait in the slot.
     """
 
     def __init__(
@@ -40,8 +42,10 @@ class LatestSlotWorker:
         on_error: Callable[[Any, Exception], None],
         now: Callable[[], float] = time.monotonic,
         name: str = "worker",
+        before: Callable[[], None] | None = None,
     ):
         self._handle, self._on_error, self._now = handle, on_error, now
+        self._before = before
         self._cv = threading.Condition()
         self._slot = None
         self._has_item = False
@@ -102,6 +106,8 @@ class LatestSlotWorker:
             self._thread.join(timeout=timeout)
 
     def _run(self) -> None:
+        if self._before is not None:
+            self._before()
         while True:
             with self._cv:
                 while not self._has_item and not self._stop:
