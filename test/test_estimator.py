@@ -162,6 +162,8 @@ class TestBadInput:
             EstimatorOptions(focal_range=(100, 10))
         with pytest.raises(ValueError, match="noise bound"):
             NoiseBound(0.8, "relative")
+        with pytest.raises(ValueError, match="shape_error"):
+            EstimatorOptions(shape_error=-0.01)
         with pytest.raises(TypeError, match="options=EstimatorOptions"):
             estimate_focal(self.depth, self.nocs, self.mask, EstimatorOptions())
         with pytest.raises(TypeError, match="options=EstimatorOptions"):

@@ -40,10 +40,13 @@ def test_no_bias_from_a_zero_mean_mechanism(family):
     assert abs(np.median(err)) <= 0.005
 
 
-# Full presets: sensor (40 frames) median |e| 0.013%, signed -0.00%, coverage 97.5%;
-# predicted (80 frames) median |e| 2.7%, signed +0.88%, coverage 87.5%.
+# Full presets: sensor (40 frames) median |e| 0.019%, signed -0.00%, coverage 97.5%;
+# predicted (200 frames) median |e| 2.95%, signed +0.91%, coverage 87.0%. The predicted preset
+# errs by about +0.7% (+0.59% on 200 tuning frames; +0.69% and +0.73% with the unseen-depth term
+# before it followed the fit's lean on depth), and a median of 200 frames scatters by about
+# 0.3%: 80 frames measured +1.01%.
 @pytest.mark.parametrize("preset,frames,cover_min",
-                         [("sensor", 40, 0.85), ("predicted", 80, 0.85)])
+                         [("sensor", 40, 0.85), ("predicted", 200, 0.85)])
 def test_full_presets_unbiased_and_std_rel_covers(preset, frames, cover_min):
     err, cover = signed_errors(preset, frames)
     assert err.size == frames

@@ -19,6 +19,7 @@ import numpy as np
 from .combine import random_effects
 from .camera import image_centre
 from .correspondences import Instance, calibrated_nocs, check_images, extract_instances
+from .error_model import object_variances
 from .object_fit import fit_objects
 from .pose import ObjectPose, umeyama
 from .solver import sample_triplets, solve_triplets
@@ -320,15 +321,9 @@ def estimate_focal(
             f"{i}: {why}" for i, why in est.rejected.items()
         )
         return est
-    # A smooth relative depth error e over an object changes its relief by about e * z, so its
-    # focal length by e * z / relief: far, flat objects say little. The fit removes the error's
-    # gradient over each object; what it cannot see (the field's curvature) is taken to be as
-    # large as the gradients it found, pooled over the frame's objects.
-    e = opt.unseen_depth_error * np.sqrt(np.mean(fits.tilt[good] ** 2))
-    var = fits.var_log_focal + (e * fits.translation[:, 2] / np.maximum(fits.relief, 1e-9)) ** 2
-    # A NOCS map that is not this object's shape (the category prior's) errs in f about as much
-    # as it misfits the shape; a perfect map leaves only noise in the unexplained share.
-    var = var + opt.shape_error**2 * (1.0 - np.minimum(fits.quality, 1.0))
+    # Errors that repeat in every frame show in no residual: their share of each object's
+    # variance follows from the fit's lean on depth and on the NOCS (.error_model).
+    var = object_variances(instances, support, fits, good, spread, opt)
     comb = random_effects(
         np.log(fits.focal[good]), var[good], opt.object_tau, opt.object_tau_weight
     )

@@ -71,9 +71,11 @@ class EstimatorOptions:
     Per-object fit (``refine``): ``fit_pixels`` pixels, ``fit_iterations`` Gauss-Newton steps,
     each object's depth-error gradient fitted as a nuisance (``depth_tilt``). Objects whose NOCS
     explain less than ``min_fit_quality`` of their shape, or span less than ``min_nocs_spread``,
-    are refused. The systematic error terms: ``unseen_depth_error`` (depth error the fit cannot
-    see, relative to the gradients it found), ``shape_error`` (per object, times the square root
-    of its unexplained shape share), and a prior between-object spread ``object_tau`` worth
+    are refused. The systematic error terms (:mod:`.error_model`): ``unseen_depth_error`` (the
+    curvature of a smooth depth-error field, which the fit's tilt does not absorb, relative to
+    the tilts it found, weighed by how much the object's fit leans on its depths),
+    ``shape_error`` (per object, times the square root of its unexplained shape share beyond
+    what noise explains), and a prior between-object spread ``object_tau`` worth
     ``object_tau_weight`` objects. No pose for an object whose own std_rel exceeds
     ``pose_max_std``.
 
@@ -127,6 +129,9 @@ class EstimatorOptions:
         ):
             if not getattr(self, name) >= 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("unseen_depth_error", "shape_error", "object_tau"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)

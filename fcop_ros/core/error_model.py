@@ -1,0 +1,125 @@
+"""The errors that repeat in every frame: how much they move an object's fitted focal length,
+and the variance of log f they add to the fit's own.
+
+The per-object fit (:mod:`.object_fit`) weighs two kinds of evidence: where the pixels are (the
+reprojection of the NOCS) and how deep they are. An error of the depth network that is the same
+for every frame of an object (its relief flattened, an additive offset, a curved depth-error
+field the fit's tilt cannot absorb) shows in no residual, so its effect on f is computed:
+at the fit's optimum the parameters move by dtheta = H^-1 J_d^T W_d delta_d for a depth
+perturbation delta_d, where H = J^T W J is the fit's normal matrix over both kinds of rows. When
+the pixels pin f down (exact NOCS: a perspective-n-point problem) a depth error barely moves it;
+when noisy NOCS leave f to the depths, it moves f one for one (a relief error delta gives -delta
+in log f, an offset o gives o / z). The unseen-depth term is sized by that derivative, so it
+follows the fit's actual lean. The NOCS side: a category prior's shape that is not this object's
+errs in f about as much as it misfits the shape.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .object_fit import ObjectFits
+
+_CAUCHY = 3.0  # the fit's robust weight scale (object_fit._CAUCHY)
+
+#: The depth-error patterns, in the order of :func:`depth_influence`'s columns.
+PATTERNS = ("relief", "offset")
+
+
+def depth_influence(instances, fits: ObjectFits, max_pixels: int = 300,
+                    depth_tilt: bool = True) -> np.ndarray:
+    """d log f / d(error) of every object (O, 2) for the :data:`PATTERNS`.
+
+    relief: a relative scaling of the object's depths about their mean (unitless); offset: one
+    metre added to every depth. Computed at the fitted parameters on up to ``max_pixels``
+    pixels per object (every k-th), with the fit's noise levels and robust weights
+    (``depth_tilt`` as the fit had it). Rows of objects whose fit is not ok are NaN.
+    """
+    o = len(instances)
+    out = np.full((o, len(PATTERNS)), np.nan)
+    if o == 0:
+        return out
+    m = min(max(len(i.d) for i in instances), max_pixels)
+    X = np.zeros((o, m, 2))
+    D = np.ones((o, m))
+    P = np.zeros((o, m, 3))
+    V = np.zeros((o, m))
+    for k, inst in enumerate(instances):
+        n = len(inst.d)
+        pick = np.linspace(0, n - 1, min(n, m)).astype(np.intp) if n > m else np.arange(n)
+        X[k, : len(pick)], D[k, : len(pick)] = inst.x[pick], inst.d[pick]
+        P[k, : len(pick)] = inst.p[pick] - 0.5
+        V[k, : len(pick)] = 1.0
+    cnt = np.maximum(V.sum(1), 1.0)
+    cen = (X * V[..., None]).sum(1) / cnt[:, None]
+    span = np.sqrt((((X - cen[:, None]) ** 2).sum(-1) * V).sum(1) / cnt)
+    U = (X - cen[:, None]) / np.maximum(span, 1e-9)[:, None, None]
+
+    f = fits.focal
+    q = np.einsum("oij,omj->omi", fits.rotation * fits.scale[:, None, None], P)
+    Xc = q + fits.translation[:, None, :]
+    z = np.where(np.abs(Xc[..., 2]) > 1e-9, Xc[..., 2], 1e-9)
+    a = f[:, None] / z
+    u, v = Xc[..., 0] * a, Xc[..., 1] * a
+    uz, vz = u / z, v / z
+    gain = 1.0 + (U * fits.tilt[:, None, :]).sum(-1)
+    ru, rv, rd = X[..., 0] - u, X[..., 1] - v, D - z * gain
+    sp = np.maximum(fits.sigma_px, 1e-6)[:, None]
+    sd = np.maximum(fits.sigma_depth, 1e-12)[:, None]
+    e2 = (ru**2 + rv**2) / (2 * sp**2) + rd**2 / sd**2
+    w = V / (1.0 + e2 / _CAUCHY**2)
+    wu, wd = w / sp**2, w / sd**2
+
+    # The Jacobian of the predictions (u, v, d) in [log f, log s, w (3), t (3), tilt (2)], as in
+    # the fit, each (O, 10, M).
+    qx, qy, qz = q[..., 0], q[..., 1], q[..., 2]
+    zero = np.zeros_like(z)
+    Ju = np.stack([u, a * qx - uz * qz, -uz * qy, a * qz + uz * qx, -a * qy,
+                   a, zero, -uz, zero, zero], 1)
+    Jv = np.stack([v, a * qy - vz * qz, -a * qz - vz * qy, vz * qx, a * qx,
+                   zero, a, -vz, zero, zero], 1)
+    Jd = np.stack([zero, gain * qz, gain * qy, -gain * qx, zero,
+                   zero, zero, gain, z * U[..., 0], z * U[..., 1]], 1)
+    H = ((Ju * wu[:, None]) @ np.swapaxes(Ju, 1, 2) + (Jv * wu[:, None]) @ np.swapaxes(Jv, 1, 2)
+         + (Jd * wd[:, None]) @ np.swapaxes(Jd, 1, 2))
+    if not depth_tilt:  # the fit had no tilt nuisance: drop its two parameters
+        H, Jd = H[:, :8, :8], Jd[:, :8]
+
+    zm = (z * V).sum(1) / cnt
+    phi = np.stack([z - zm[:, None], np.ones_like(z)], -1)  # (O, M, patterns)
+    G = (Jd * wd[:, None]) @ phi  # (O, npar, patterns)
+    with np.errstate(all="ignore"):
+        try:
+            dtheta = np.linalg.solve(H, G)
+        except np.linalg.LinAlgError:
+            dtheta = np.stack([np.linalg.lstsq(h, g, rcond=None)[0] for h, g in zip(H, G)])
+    out = dtheta[:, 0, :]
+    out[~(fits.ok & np.all(np.isfinite(out), 1))] = np.nan
+    return out
+
+
+def object_variances(instances, support, fits: ObjectFits, good, spread, options):
+    """Per object (O,): the fit's variance of log f plus the systematic terms.
+
+    instances / support: the objects' raw and NOCS-calibrated correspondences (the fit's input);
+    good: the objects whose fit is used (they pool the tilts); spread: rms distance of each
+    object's (calibrated) NOCS from their centroid. Terms, in log f: a smooth depth-error
+    field's curvature, taken as ``unseen_depth_error`` times the rms of the fitted tilts over
+    the frame's objects, changes an object's relief by about that times z, so its log f by that
+    times z / relief times the relief derivative; ``shape_error`` times the square root of the
+    shape share the similarity leaves unexplained, not counting the share that the measured
+    depth and NOCS noise alone would leave.
+    """
+    relief_lean = depth_influence(support, fits, options.fit_pixels, options.depth_tilt)[:, 0]
+    curvature = options.unseen_depth_error * np.sqrt(np.mean(fits.tilt[good] ** 2))
+    unseen = curvature * fits.translation[:, 2] / np.maximum(fits.relief, 1e-9)
+    var = fits.var_log_focal + (unseen * relief_lean) ** 2
+    # Noise shares of the 3D points' and the NOCS' variance, which lower the fit's quality even
+    # for a perfect shape.
+    noise_y = np.array([np.mean(i.var_d) for i in support]) / np.maximum(
+        fits.scale**2 * spread**2, 1e-300)
+    noise_p = np.array([0.0 if s.var_p is None else
+                        3.0 * np.mean(s.var_p) / max(float(np.sum(np.var(r.p, axis=0))), 1e-300)
+                        for s, r in zip(support, instances)])
+    kept = (1.0 - np.minimum(noise_y, 0.9)) * (1.0 - np.minimum(noise_p, 0.9))
+    quality = np.minimum(fits.quality / kept, 1.0)
+    return var + options.shape_error**2 * (1.0 - quality)

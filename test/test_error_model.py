@@ -1,0 +1,86 @@
+"""The error model's derivatives (fcop_ros.core.error_model) against refits of perturbed depths:
+how far a relief or offset error of the depth moves each object's fitted focal length."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fcop_ros import estimate_focal
+from fcop_ros.core.correspondences import calibrated_nocs, extract_instances
+from fcop_ros.core.error_model import depth_influence
+from fcop_ros.core.object_fit import fit_objects
+from fcop_ros.synthetic import scenes
+
+FIRST_SEED = 7800
+
+
+def _objects(preset, seed):
+    fr = scenes.world_frame(preset, FIRST_SEED + seed)
+    inst = [calibrated_nocs(i) for i in extract_instances(
+        fr.depth, fr.nocs, fr.mask, rng=np.random.default_rng(seed))]
+    return fr, inst
+
+
+def _fit(inst, focal):
+    return fit_objects(inst, focal, max_pixels=300, iterations=10, rng=np.random.default_rng(1))
+
+
+def _refit_slopes(preset, seeds, step_relief=0.005, step_offset=0.001):
+    """(predicted, refit) d log f / d error of every ok object, for relief and offset."""
+    pred, refit = [], []
+    for s in seeds:
+        fr, inst = _objects(preset, s)
+        fit = _fit(inst, fr.focal)
+        infl = depth_influence(inst, fit)
+        for change, step, col in ((lambda i, e: i.d.mean() + (1 + e) * (i.d - i.d.mean()),
+                                   step_relief, 0),
+                                  (lambda i, e: i.d + e, step_offset, 1)):
+            moved = _fit([dataclasses.replace(i, d=change(i, step)) for i in inst], fr.focal)
+            slope = np.log(moved.focal / fit.focal) / step
+            ok = fit.ok & moved.ok
+            pred.append((col, infl[ok, col]))
+            refit.append((col, slope[ok]))
+    out = {}
+    for col in (0, 1):
+        p = np.concatenate([v for c, v in pred if c == col])
+        r = np.concatenate([v for c, v in refit if c == col])
+        out[col] = (p, r)
+    return out
+
+
+def test_predicted_depth_moves_focal_one_for_one_as_the_derivatives_say():
+    """Noisy NOCS leave f to the depths: a relief error delta moves log f by about -delta and
+    an offset o by about o / z, and the derivatives agree with refits (measured on 6 frames,
+    30 objects: relief median -1.02, median |predicted - refit| 0.012; offset median relative
+    difference 1.0%)."""
+    slopes = _refit_slopes("predicted", range(6))
+    p, r = slopes[0]
+    assert p.size >= 12
+    assert np.median(p) == pytest.approx(-1.0, abs=0.15)
+    assert np.median(np.abs(p - r)) <= 0.03
+    p, r = slopes[1]
+    assert np.median(np.abs(p - r) / np.maximum(np.abs(r), 1e-9)) <= 0.05
+
+
+def test_exact_nocs_leave_focal_to_the_pixels():
+    """With the true NOCS the reprojection alone fixes f (a perspective-n-point problem): depth
+    errors barely move it, so they add almost no variance (measured median |d log f / d relief|
+    0.001 on sensor frames)."""
+    infl = []
+    for s in range(4):
+        fr, inst = _objects("sensor", s)
+        fit = _fit(inst, fr.focal)
+        d = depth_influence(inst, fit)
+        infl.append(np.abs(d[fit.ok, 0]))
+    assert np.median(np.concatenate(infl)) <= 0.05
+
+
+def test_std_rel_follows_the_fits_lean_on_depth():
+    """Where the pixels fix f, the unseen-depth term no longer inflates std_rel (12 sensor frames
+    measured: median std_rel 0.21%, error 0.005%; 0.94% before the term followed the lean)."""
+    std = []
+    for s in range(12):
+        fr = scenes.world_frame("sensor", FIRST_SEED + s)
+        est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False)
+        std.append(est.std_rel)
+    assert np.median(std) <= 0.005
