@@ -169,3 +169,19 @@ def test_calibrated_nocs(monkeypatch):
             np.testing.assert_allclose(fast.p, slow.p, rtol=0, atol=1e-12)
             assert fast.p.shape == inst.p.shape
     assert compared >= 4
+
+
+@pytest.mark.parametrize("dtype", ["int8", "uint8", "int16", "uint16", "int32", "uint32",
+                                   "int64", "uint64"])
+def test_mask_types(monkeypatch, dtype):
+    """Every integer mask type (the compiled id pass reads the mask's bytes), negative ids as
+    background, and a mask that is not C-contiguous."""
+    depth, nocs, mask = _moderate_frame(9)
+    m = mask.astype(dtype)
+    if np.dtype(dtype).kind == "i":
+        m[::7, ::5] = -1
+        m[-40:, :40] = np.iinfo(dtype).min
+    for mm in (m, np.asfortranarray(m)):
+        fast, slow = _extract_both(monkeypatch, depth, nocs, mm, **ESTIMATOR)
+        assert len(fast) > 0
+        assert_same_instances(fast, slow)

@@ -23,6 +23,7 @@ Conventions and choices:
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, replace
 
 import cv2
@@ -143,6 +144,17 @@ def _few_ids_and_boxes(mask: np.ndarray, top_id: int, min_pixels: int):
     return np.array(ids, dtype=np.int64), np.array(counts, dtype=np.int64), boxes
 
 
+def _few_ids_and_boxes_compiled(mask: np.ndarray, top_id: int, min_pixels: int):
+    """_few_ids_and_boxes by one compiled pass over the mask's bytes (little-endian; one
+    kernel for every integer type, so that warm_up's serves all)."""
+    mask = np.ascontiguousarray(mask)
+    raw = mask.view(np.uint8).reshape(mask.shape[0], mask.shape[1] * mask.dtype.itemsize)
+    count, box = _few_ids_k(raw, mask.dtype.itemsize, top_id)
+    ids = np.flatnonzero(count >= max(min_pixels, 1))
+    ids = ids[ids > 0]
+    return ids.astype(np.int64), count[ids], [tuple(int(v) for v in box[i]) for i in ids]
+
+
 def _second_diff_sigma(img: np.ndarray, ok: np.ndarray) -> float:
     """Robust per-pixel noise sigma from horizontal and vertical second differences."""
     vals = []
@@ -238,7 +250,10 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
     if top_id <= _FEW_IDS:
         # Few possible ids: one comparison per id gives its count and box (OpenCV), about 3x
         # faster than a histogram of the whole image plus a box pass.
-        ids, counts, boxes = _few_ids_and_boxes(mask, top_id, min_object_pixels)
+        if compiled.ENABLED and mask.dtype.isnative and sys.byteorder == "little":
+            ids, counts, boxes = _few_ids_and_boxes_compiled(mask, top_id, min_object_pixels)
+        else:
+            ids, counts, boxes = _few_ids_and_boxes(mask, top_id, min_object_pixels)
     else:
         # Negative ids are background; the clipped ids viewed as unsigned need no second clip.
         labels = mask if mask.dtype.kind == "u" else np.maximum(mask, 0).view(
@@ -911,3 +926,61 @@ def _calibrated_nocs_k(p, noise):
         for b in range(3):
             out[k, b] = centre[b] + q0 * A[0, b] + q1 * A[1, b] + q2 * A[2, b]
     return out
+
+
+@_inner
+def _add_to_box(count, box, v, i, j):
+    """Count pixel (i, j) for id v and widen its box."""
+    count[v] += 1
+    if i < box[v, 0]:
+        box[v, 0] = i
+    box[v, 1] = i + 1
+    if j < box[v, 2]:
+        box[v, 2] = j
+    if j + 1 > box[v, 3]:
+        box[v, 3] = j + 1
+
+
+@kernel
+def _few_ids_k(raw, itemsize, top):
+    """Pixel count and half-open box (row0, row1, col0, col1) of each id 1..top in a mask of
+    ``itemsize``-byte little-endian integers seen as bytes ``raw``; other values (negative
+    ones have high bytes 0xff) are ignored. Bytes, so that one compiled signature serves every
+    integer type."""
+    h = raw.shape[0]
+    w = raw.shape[1] // itemsize
+    count = np.zeros(top + 1, np.int64)
+    box = np.zeros((top + 1, 4), np.int64)
+    for v in range(top + 1):
+        box[v, 0], box[v, 2] = h, w
+    for i in range(h):
+        row = raw[i]
+        if itemsize == 1:
+            for j in range(w):
+                v = np.int64(row[j])
+                if v != 0 and v <= top:
+                    _add_to_box(count, box, v, i, j)
+        elif itemsize == 2:
+            for j in range(w):
+                v = np.int64(row[2 * j]) | (np.int64(row[2 * j + 1]) << 8)
+                if v != 0 and v <= top:
+                    _add_to_box(count, box, v, i, j)
+        elif itemsize == 4:
+            for j in range(w):
+                o = 4 * j
+                v = (np.int64(row[o]) | (np.int64(row[o + 1]) << 8)
+                     | (np.int64(row[o + 2]) << 16) | (np.int64(row[o + 3]) << 24))
+                if v != 0 and v <= top:
+                    _add_to_box(count, box, v, i, j)
+        else:
+            for j in range(w):
+                o = j * itemsize
+                v = np.int64(row[o])
+                if v != 0 and v <= top:
+                    high = False
+                    for b in range(1, itemsize):
+                        if row[o + b] != 0:
+                            high = True
+                    if not high:
+                        _add_to_box(count, box, v, i, j)
+    return count, box
