@@ -624,32 +624,38 @@ def _thin_median_k(buf, n, scratch):
 
 
 @_inner
-def _second_diff_sigma_k(a, ok, buf, scratch, scratch2):
-    """_second_diff_sigma of one crop plane ``a`` with its valid pixels ``ok``."""
-    h, w = a.shape
+def _second_diff_sigmas_k(V, ok, bufs, scratch, scratch2, out):
+    """_second_diff_sigma of each of the planes V[:4] with the valid pixels ``ok`` into out[:4]
+    (the second differences of all four gathered in one pass; bufs: (4, n) scratch)."""
+    h, w = ok.shape
     n = 0
     for i in range(0, h, 3):
         for j in range(w - 2):
             if ok[i, j] and ok[i, j + 1] and ok[i, j + 2]:
-                buf[n] = a[i, j] - 2 * a[i, j + 1] + a[i, j + 2]
+                for c in range(4):
+                    bufs[c, n] = V[c, i, j] - 2 * V[c, i, j + 1] + V[c, i, j + 2]
                 n += 1
     for j in range(0, w, 3):
         for i in range(h - 2):
             if ok[i, j] and ok[i + 1, j] and ok[i + 2, j]:
-                buf[n] = a[i, j] - 2 * a[i + 1, j] + a[i + 2, j]
+                for c in range(4):
+                    bufs[c, n] = V[c, i, j] - 2 * V[c, i + 1, j] + V[c, i + 2, j]
                 n += 1
+    for c in range(4):
+        out[c] = 0.0
     if n < 8:
-        return 0.0
+        return
     step = n // 600 if n > 1200 else 1
-    m = 0
-    for i in range(0, n, step):
-        scratch[m] = buf[i]
-        scratch2[m] = buf[i]
-        m += 1
-    med = _median_k(scratch2, m)
-    for i in range(m):
-        scratch2[i] = abs(scratch[i] - med)
-    return MAD_TO_SIGMA * _median_k(scratch2, m) / np.sqrt(6.0)
+    for c in range(4):
+        m = 0
+        for i in range(0, n, step):
+            scratch[m] = bufs[c, i]
+            scratch2[m] = bufs[c, i]
+            m += 1
+        med = _median_k(scratch2, m)
+        for i in range(m):
+            scratch2[i] = abs(scratch[i] - med)
+        out[c] = MAD_TO_SIGMA * _median_k(scratch2, m) / np.sqrt(6.0)
 
 
 @_inner
@@ -766,12 +772,11 @@ def _crop_kernel(depth, nocs, inst, r0, c0, st, rad, cx, cy, min_px, denoise_rad
         return 0, e_i, e_i, e_f, np.zeros((0, 3)), e_f, e_f, e_f, 0.0, 0.0
     size = max(((h + 2) // 3) * max(w - 2, 0) + ((w + 2) // 3) * max(h - 2, 0), h * w)
     buf, buf2, scratch, scratch2 = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
-    sd = _second_diff_sigma_k(V[0], ok, buf, scratch, scratch2)
-    sp2 = 0.0
-    for c in range(3):
-        s = _second_diff_sigma_k(V[c + 1], ok, buf, scratch, scratch2)
-        sp2 += s * s
-    sp = np.sqrt(sp2 / 3.0)
+    sig = np.empty(4)
+    _second_diff_sigmas_k(V, ok, np.empty((4, size)), scratch, scratch2, sig)
+    sd = sig[0]
+    # The NOCS noise: the RMS over the channels, as np.mean of the three squares.
+    sp = np.sqrt((sig[1] * sig[1] + sig[2] * sig[2] + sig[3] * sig[3]) / 3.0)
     n = _gather_k(V[0], ok, buf)
     depth_med = _thin_median_k(buf, n, scratch)
     if sd < noise_floor * depth_med:
