@@ -20,6 +20,11 @@ Conventions and choices:
   estimated from second differences (blind to planar slopes); below ``noise_floor`` (relative
   to depth; 4x that in NOCS units) it is surface curvature, and the data are left as they are.
 - Large instances are randomly subsampled to ``max_pixels`` to bound the cost.
+
+Where the compiled kernels are on (:mod:`fcop_ros.core.compiled`) each instance's crop is
+processed by one of them (``_crop_kernel``) instead of the numpy steps on a mosaic of all crops
+(``_extract_mosaic``), which stay as the fallback: both keep the same pixels and draw the same
+random subsets, and their values agree up to rounding.
 """
 from __future__ import annotations
 
@@ -145,8 +150,8 @@ def _few_ids_and_boxes(mask: np.ndarray, top_id: int, min_pixels: int):
 
 
 def _few_ids_and_boxes_compiled(mask: np.ndarray, top_id: int, min_pixels: int):
-    """_few_ids_and_boxes by one compiled pass over the mask's bytes (little-endian; one
-    kernel for every integer type, so that warm_up's serves all)."""
+    """_few_ids_and_boxes by one compiled pass over the mask's bytes (little-endian): one
+    compiled signature for every integer type, so the one warm_up compiles serves them all."""
     mask = np.ascontiguousarray(mask)
     raw = mask.view(np.uint8).reshape(mask.shape[0], mask.shape[1] * mask.dtype.itemsize)
     count, box = _few_ids_k(raw, mask.dtype.itemsize, top_id)
