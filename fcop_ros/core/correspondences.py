@@ -20,16 +20,24 @@ Conventions and choices:
   estimated from second differences (blind to planar slopes); below ``noise_floor`` (relative
   to depth; 4x that in NOCS units) it is surface curvature, and the data are left as they are.
 - Large instances are randomly subsampled to ``max_pixels`` to bound the cost.
+
+Where the compiled kernels are on (:mod:`fcop_ros.core.compiled`) each instance's crop is
+processed by one of them (``_crop_kernel``) instead of the numpy steps on a mosaic of all crops
+(``_extract_mosaic``), which stay as the fallback: both keep the same pixels and draw the same
+random subsets, and their values agree up to rounding.
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
 from scipy import ndimage
 
+from . import compiled
 from .camera import image_centre
+from .compiled import kernel
 from .robust import MAD_TO_SIGMA
 
 
@@ -141,6 +149,17 @@ def _few_ids_and_boxes(mask: np.ndarray, top_id: int, min_pixels: int):
     return np.array(ids, dtype=np.int64), np.array(counts, dtype=np.int64), boxes
 
 
+def _few_ids_and_boxes_compiled(mask: np.ndarray, top_id: int, min_pixels: int):
+    """_few_ids_and_boxes by one compiled pass over the mask's bytes (little-endian): one
+    compiled signature for every integer type, so the one warm_up compiles serves them all."""
+    mask = np.ascontiguousarray(mask)
+    raw = mask.view(np.uint8).reshape(mask.shape[0], mask.shape[1] * mask.dtype.itemsize)
+    count, box = _few_ids_k(raw, mask.dtype.itemsize, top_id)
+    ids = np.flatnonzero(count >= max(min_pixels, 1))
+    ids = ids[ids > 0]
+    return ids.astype(np.int64), count[ids], [tuple(int(v) for v in box[i]) for i in ids]
+
+
 def _second_diff_sigma(img: np.ndarray, ok: np.ndarray) -> float:
     """Robust per-pixel noise sigma from horizontal and vertical second differences."""
     vals = []
@@ -236,7 +255,10 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
     if top_id <= _FEW_IDS:
         # Few possible ids: one comparison per id gives its count and box (OpenCV), about 3x
         # faster than a histogram of the whole image plus a box pass.
-        ids, counts, boxes = _few_ids_and_boxes(mask, top_id, min_object_pixels)
+        if compiled.ENABLED and mask.dtype.isnative and sys.byteorder == "little":
+            ids, counts, boxes = _few_ids_and_boxes_compiled(mask, top_id, min_object_pixels)
+        else:
+            ids, counts, boxes = _few_ids_and_boxes(mask, top_id, min_object_pixels)
     else:
         # Negative ids are background; the clipped ids viewed as unsigned need no second clip.
         labels = mask if mask.dtype.kind == "u" else np.maximum(mask, 0).view(
@@ -267,11 +289,18 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         st = max(1, int(np.ceil(np.sqrt(npix / (2.0 * max_pixels)))))
         crops.append(_Crop(int(iid), int(npix), r0, c0, st, inst[::st, ::st],
                            depth[r0:r1:st, c0:c1:st], nocs[r0:r1:st, c0:c1:st]))
-    # All instances are processed together, their crops stacked in one mosaic, ordered by the
-    # radius of their box filter (the same window in image pixels: it follows the stride).
     if not crops:
         return out
+    # The radius of each crop's box filter: the same window in image pixels (it follows the
+    # stride).
     rads = [max(int(round(denoise_radius / cr.st)), 1) for cr in crops]
+    if compiled.ENABLED:
+        _emit_compiled(out, crops, rads, depth, nocs, (cx, cy), rng, min_object_pixels,
+                       denoise_radius, outlier_sigma, max_pixels, nocs_tolerance, noise_floor,
+                       edge_sigma)
+        return out
+    # All instances are processed together, their crops stacked in one mosaic, ordered by
+    # their radius.
     order = sorted(range(len(crops)), key=rads.__getitem__)
     found = _extract_mosaic([crops[k] for k in order], order, [rads[k] for k in order], (cx, cy),
                             min_object_pixels, denoise_radius, outlier_sigma, nocs_tolerance,
@@ -298,6 +327,41 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                             np.ascontiguousarray(res.pz[:, rr, cc].T), var_d, res.sigma_d,
                             res.sigma_p, cr.npix, int(valid), var_p))
     return out
+
+
+def _emit_compiled(out, crops, rads, depth, nocs, centre, rng, min_object_pixels,
+                   denoise_radius, outlier_sigma, max_pixels, nocs_tolerance, noise_floor,
+                   edge_sigma):
+    """The crops' instances appended to ``out`` by the compiled kernel, one call per crop: the
+    same instances, pixels and random subsets as _extract_mosaic and the loop that reads it."""
+    cx, cy = centre
+    # One type per argument, so that the kernel compiled by warm_up serves every frame.
+    depth = np.ascontiguousarray(depth, dtype=np.float64)
+    nocs = np.ascontiguousarray(nocs, dtype=np.float64)
+    args = (int(max(min_object_pixels, 3)), int(denoise_radius), float(outlier_sigma),
+            float(nocs_tolerance), float(noise_floor), float(edge_sigma))
+    for cr, rad in zip(crops, rads):
+        status, rr, cc, d, p, xu, xv, cn, sd, sp = _crop_kernel(
+            depth, nocs, np.ascontiguousarray(cr.inst), cr.r0, cr.c0, cr.st, rad, float(cx),
+            float(cy), *args)
+        if status == 0:
+            continue
+        valid = rr.size
+        if valid > max_pixels:
+            pick = rng.choice(valid, size=max_pixels, replace=False)
+            rr, cc, d, p = rr[pick], cc[pick], d[pick], p[pick]
+            if status == 2:
+                xu, xv, cn = xu[pick], xv[pick], cn[pick]
+        if status == 1:
+            x = np.column_stack([cc * cr.st + cr.c0 - cx,
+                                 rr * cr.st + cr.r0 - cy]).astype(np.float64)
+            var_d = np.full(rr.size, sd ** 2)
+            var_p = np.full(rr.size, sp ** 2)
+        else:
+            x = np.column_stack([xu, xv])
+            var_d = sd ** 2 / np.maximum(cn, 1.0)
+            var_p = sp ** 2 / np.maximum(cn, 1.0)
+        out.append(Instance(cr.iid, x, d, p, var_d, sd, sp, cr.npix, int(valid), var_p))
 
 
 @dataclass
@@ -497,6 +561,9 @@ def calibrated_nocs(inst: Instance) -> Instance:
     noise = float(np.mean(inst.var_p))
     if not noise > 0:
         return inst
+    if compiled.ENABLED:
+        return replace(inst, p=_calibrated_nocs_k(np.ascontiguousarray(inst.p, np.float64),
+                                                  noise))
     centre = inst.p.mean(0)
     q = inst.p - centre
     cov = q.T @ q / len(q)
@@ -504,3 +571,426 @@ def calibrated_nocs(inst: Instance) -> Instance:
     gain = np.clip(val - noise, 0.0, None) / np.maximum(val, 1e-300)
     p = centre + ((q @ vec) * gain) @ vec.T
     return replace(inst, p=p)
+
+
+# Compiled kernels (fcop_ros.core.compiled): each instance's crop in one pass of plain loops,
+# giving what _extract_mosaic gives for it, selections bit for bit (box sums are formed exactly
+# in float64 and rounded to float32, as OpenCV's box filter does; medians are np.median's).
+
+def _inner(fn):
+    """A helper of a kernel: compiled like one but not listed in compiled.KERNELS, because a
+    kernel loaded from the disk cache holds its helpers' code and leaves them uncompiled."""
+    if compiled.numba is None:
+        return fn
+    return compiled.numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+
+
+@_inner
+def _median_k(v, n):
+    """np.median of v[:n] (n > 0) by selection (Hoare's find); reorders v[:n]."""
+    k = n // 2
+    lo, hi = 0, n - 1
+    while lo < hi:
+        x = v[k]
+        i, j = lo, hi
+        while True:
+            while v[i] < x:
+                i += 1
+            while x < v[j]:
+                j -= 1
+            if i <= j:
+                v[i], v[j] = v[j], v[i]
+                i += 1
+                j -= 1
+            if i > j:
+                break
+        if j < k:
+            lo = i
+        if k < i:
+            hi = j
+    if n % 2:
+        return v[k]
+    below = v[0]
+    for i in range(1, k):  # everything before k is <= v[k]: the largest is the (k-1)th
+        if v[i] > below:
+            below = v[i]
+    return 0.5 * (below + v[k])
+
+
+@_inner
+def _thin_median_k(buf, n, scratch):
+    """_median(_thin(buf[:n])) (n > 0), using scratch; buf is left as it is."""
+    step = n // 600 if n > 1200 else 1
+    m = 0
+    for i in range(0, n, step):
+        scratch[m] = buf[i]
+        m += 1
+    return _median_k(scratch, m)
+
+
+@_inner
+def _second_diff_sigmas_k(V, ok, bufs, scratch, scratch2, out):
+    """_second_diff_sigma of each of the planes V[:4] with the valid pixels ``ok`` into out[:4]
+    (the second differences of all four gathered in one pass; bufs: (4, n) scratch)."""
+    h, w = ok.shape
+    n = 0
+    for i in range(0, h, 3):
+        for j in range(w - 2):
+            if ok[i, j] and ok[i, j + 1] and ok[i, j + 2]:
+                for c in range(4):
+                    bufs[c, n] = V[c, i, j] - 2 * V[c, i, j + 1] + V[c, i, j + 2]
+                n += 1
+    for j in range(0, w, 3):
+        for i in range(h - 2):
+            if ok[i, j] and ok[i + 1, j] and ok[i + 2, j]:
+                for c in range(4):
+                    bufs[c, n] = V[c, i, j] - 2 * V[c, i + 1, j] + V[c, i + 2, j]
+                n += 1
+    for c in range(4):
+        out[c] = 0.0
+    if n < 8:
+        return
+    step = n // 600 if n > 1200 else 1
+    for c in range(4):
+        m = 0
+        for i in range(0, n, step):
+            scratch[m] = bufs[c, i]
+            scratch2[m] = bufs[c, i]
+            m += 1
+        med = _median_k(scratch2, m)
+        for i in range(m):
+            scratch2[i] = abs(scratch[i] - med)
+        out[c] = MAD_TO_SIGMA * _median_k(scratch2, m) / np.sqrt(6.0)
+
+
+@_inner
+def _box_sums_k(ok, V, nch, rad, R, S):
+    """Box sums over the pixels ``ok`` in a (2 rad+1)^2 window: S[0] their count, S[c+1] the
+    sum of plane V[c] rounded to float32 (R: scratch of S's shape), by running sums along
+    rows, then columns. Like OpenCV's box filter in _local_means it sums float32 values in
+    float64: exactly, unless a crop's values span more than 2^29, so the order does not
+    matter, and a pixel taken out later can be subtracted (_box_remove_k)."""
+    h, w = ok.shape
+    line = np.zeros(w + 2 * rad)  # one row of values, between rad zeros each side
+    acc = np.empty(w)
+    for c in range(nch + 1):
+        for i in range(h):  # rows: direct sums, vectorised across the row
+            if c == 0:
+                for j in range(w):
+                    line[rad + j] = 1.0 if ok[i, j] else 0.0
+            else:
+                for j in range(w):
+                    line[rad + j] = np.float32(V[c - 1, i, j]) if ok[i, j] else 0.0
+            for j in range(w):
+                R[c, i, j] = line[j]
+            for t in range(1, 2 * rad + 1):
+                for j in range(w):
+                    R[c, i, j] += line[j + t]
+        for j in range(w):  # columns: running sums, vectorised across the row
+            acc[j] = 0.0
+        for i in range(min(rad, h)):
+            for j in range(w):
+                acc[j] += R[c, i, j]
+        for i in range(h):
+            if i + rad < h:
+                for j in range(w):
+                    acc[j] += R[c, i + rad, j]
+            for j in range(w):
+                S[c, i, j] = acc[j]
+            if i - rad >= 0:
+                for j in range(w):
+                    acc[j] -= R[c, i - rad, j]
+
+
+@_inner
+def _box_remove_k(S, V, nch, rad, i, j):
+    """Take pixel (i, j) out of the box sums S of _box_sums_k."""
+    h, w = S.shape[1], S.shape[2]
+    for ii in range(max(i - rad, 0), min(i + rad + 1, h)):
+        for jj in range(max(j - rad, 0), min(j + rad + 1, w)):
+            S[0, ii, jj] -= 1.0
+    for c in range(nch):
+        v = np.float64(np.float32(V[c, i, j]))
+        for ii in range(max(i - rad, 0), min(i + rad + 1, h)):
+            for jj in range(max(j - rad, 0), min(j + rad + 1, w)):
+                S[c + 1, ii, jj] -= v
+
+
+@_inner
+def _box_mean_k(S, c, i, j):
+    """_local_means's mean of plane c at (i, j) from the box sums S: float32 quotient of the
+    float32-rounded sums, widened."""
+    den = max(np.float32(S[0, i, j]), np.float32(1e-6))
+    return np.float64(np.float32(np.float32(S[c + 1, i, j]) / den))
+
+
+@_inner
+def _gather_k(plane, ok, buf):
+    """plane[ok] (row-major) into buf; returns the count."""
+    h, w = ok.shape
+    n = 0
+    for i in range(h):
+        for j in range(w):
+            if ok[i, j]:
+                buf[n] = plane[i, j]
+                n += 1
+    return n
+
+
+@kernel
+def _crop_kernel(depth, nocs, inst, r0, c0, st, rad, cx, cy, min_px, denoise_radius,
+                 outlier_sigma, nocs_tolerance, noise_floor, edge_sigma):
+    """What _extract_mosaic does for one crop (eroded, strided mask ``inst`` whose pixel (i,j)
+    is image pixel (r0+i st, c0+j st)), with each box sum formed once and pixels dropped by
+    the outlier and edge tests subtracted from it. Returns (status, rr, cc, d, p, xu, xv, cnt,
+    sigma_d, sigma_p): status 0 too few usable pixels, 1 raw values kept, 2 denoised (xu, xv
+    and cnt given); rr, cc the kept pixels of the crop in row-major order, and their values."""
+    h, w = inst.shape
+    ok = np.zeros((h, w), np.bool_)
+    V = np.zeros((6, h, w))
+    n_ok = 0
+    lo, hi = -nocs_tolerance, 1 + nocs_tolerance
+    for i in range(h):
+        for j in range(w):
+            if not inst[i, j]:
+                continue
+            y, x = r0 + i * st, c0 + j * st
+            d = depth[y, x]
+            if not (d > 0 and d < np.inf):
+                continue
+            good, nonzero = True, False
+            for c in range(3):
+                v = nocs[y, x, c]
+                if not (v >= lo and v <= hi):  # false for NaN
+                    good = False
+                if v != 0:
+                    nonzero = True
+            if good and nonzero:
+                ok[i, j] = True
+                n_ok += 1
+                V[0, i, j] = d
+                for c in range(3):
+                    V[c + 1, i, j] = nocs[y, x, c]
+    e_i = np.zeros(0, np.int64)
+    e_f = np.zeros(0)
+    if n_ok < min_px:
+        return 0, e_i, e_i, e_f, np.zeros((0, 3)), e_f, e_f, e_f, 0.0, 0.0
+    size = max(((h + 2) // 3) * max(w - 2, 0) + ((w + 2) // 3) * max(h - 2, 0), h * w)
+    buf, buf2, scratch, scratch2 = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
+    sig = np.empty(4)
+    _second_diff_sigmas_k(V, ok, np.empty((4, size)), scratch, scratch2, sig)
+    sd = sig[0]
+    # The NOCS noise: the RMS over the channels, as np.mean of the three squares.
+    sp = np.sqrt((sig[1] * sig[1] + sig[2] * sig[2] + sig[3] * sig[3]) / 3.0)
+    n = _gather_k(V[0], ok, buf)
+    depth_med = _thin_median_k(buf, n, scratch)
+    if sd < noise_floor * depth_med:
+        sd = 0.0
+    if sp < 4 * noise_floor:
+        sp = 0.0
+    denoise = False
+    S = np.zeros((0, h, w))
+    nch = 4
+    if denoise_radius > 0 or outlier_sigma > 0:
+        denoise = denoise_radius > 0 and (sd > 0 or sp > 0)
+    if denoise or (denoise_radius > 0 or outlier_sigma > 0) and (outlier_sigma > 0
+                                                                  or edge_sigma > 0):
+        if denoise:
+            nch = 6
+            for i in range(h):
+                v = (i * st + r0) - cy
+                for j in range(w):
+                    V[4, i, j] = V[0, i, j] * ((j * st + c0) - cx)
+                    V[5, i, j] = V[0, i, j] * v
+        S = np.empty((nch + 1, h, w))
+        _box_sums_k(ok, V, nch, rad, np.empty((nch + 1, h, w)), S)
+    if outlier_sigma > 0:
+        n = 0
+        for i in range(h):
+            for j in range(w):
+                if ok[i, j]:
+                    buf[n] = abs(V[0, i, j] - _box_mean_k(S, 0, i, j))
+                    dp0 = V[1, i, j] - _box_mean_k(S, 1, i, j)
+                    dp1 = V[2, i, j] - _box_mean_k(S, 2, i, j)
+                    dp2 = V[3, i, j] - _box_mean_k(S, 3, i, j)
+                    buf2[n] = np.sqrt(dp0 * dp0 + dp1 * dp1 + dp2 * dp2)
+                    n += 1
+        thr_d = outlier_sigma * max(MAD_TO_SIGMA * _thin_median_k(buf, n, scratch),
+                                    1e-9 * depth_med)
+        thr_p = outlier_sigma * max(MAD_TO_SIGMA * _thin_median_k(buf2, n, scratch), 1e-9)
+        n2 = 0
+        for k in range(n):
+            if buf[k] <= thr_d and buf2[k] <= thr_p:
+                n2 += 1
+        if n2 >= min_px and n2 != n_ok:
+            k = 0
+            for i in range(h):
+                for j in range(w):
+                    if ok[i, j]:
+                        if not (buf[k] <= thr_d and buf2[k] <= thr_p):
+                            ok[i, j] = False
+                            _box_remove_k(S, V, nch, rad, i, j)
+                        k += 1
+            n_ok = n2
+    if edge_sigma > 0 and (denoise_radius > 0 or outlier_sigma > 0):
+        md = np.zeros((h, w))
+        for i in range(h):
+            for j in range(w):
+                if ok[i, j]:
+                    md[i, j] = _box_mean_k(S, 0, i, j)
+        g = np.zeros((h, w))
+        n = 0
+        for i in range(h):
+            for j in range(w):
+                gh = 0.0
+                if 0 < j < w - 1 and ok[i, j - 1] and ok[i, j + 1]:
+                    gh = abs(md[i, j + 1] - md[i, j - 1]) * 0.5
+                gv = 0.0
+                if 0 < i < h - 1 and ok[i - 1, j] and ok[i + 1, j]:
+                    gv = abs(md[i + 1, j] - md[i - 1, j]) * 0.5
+                g[i, j] = max(gh, gv)
+                if ok[i, j] and g[i, j] > 0:
+                    buf[n] = g[i, j]
+                    n += 1
+        if n >= 8:
+            thr_g = (edge_sigma * MAD_TO_SIGMA * _thin_median_k(buf, n, scratch)
+                     + noise_floor * depth_med)
+            n2 = 0
+            for i in range(h):
+                for j in range(w):
+                    if ok[i, j] and g[i, j] <= thr_g:
+                        n2 += 1
+            if n2 >= min_px:
+                for i in range(h):
+                    for j in range(w):
+                        if ok[i, j] and not g[i, j] <= thr_g:
+                            ok[i, j] = False
+                            if denoise:
+                                _box_remove_k(S, V, nch, rad, i, j)
+                n_ok = n2
+    if n_ok < min_px:
+        return 0, e_i, e_i, e_f, np.zeros((0, 3)), e_f, e_f, e_f, 0.0, 0.0
+    rr = np.empty(n_ok, np.int64)
+    cc = np.empty(n_ok, np.int64)
+    d = np.empty(n_ok)
+    p = np.empty((n_ok, 3))
+    k = 0
+    for i in range(h):
+        for j in range(w):
+            if ok[i, j]:
+                rr[k], cc[k] = i, j
+                k += 1
+    if not denoise:
+        for k in range(n_ok):
+            d[k] = V[0, rr[k], cc[k]]
+            for c in range(3):
+                p[k, c] = V[c + 1, rr[k], cc[k]]
+        return 1, rr, cc, d, p, e_f, e_f, e_f, sd, sp
+    xu = np.empty(n_ok)
+    xv = np.empty(n_ok)
+    cn = np.empty(n_ok)
+    for k in range(n_ok):
+        i, j = rr[k], cc[k]
+        d[k] = _box_mean_k(S, 0, i, j)
+        for c in range(3):
+            p[k, c] = _box_mean_k(S, c + 1, i, j)
+        xu[k] = _box_mean_k(S, 4, i, j) / d[k]
+        xv[k] = _box_mean_k(S, 5, i, j) / d[k]
+        cn[k] = np.float32(S[0, i, j])
+    return 2, rr, cc, d, p, xu, xv, cn, sd, sp
+
+
+@kernel
+def _calibrated_nocs_k(p, noise):
+    """calibrated_nocs's new NOCS: the points shrunk towards their centre along each principal
+    axis by the share of its variance left after ``noise``, in one 3x3 map."""
+    n = p.shape[0]
+    centre = np.zeros(3)
+    for k in range(n):
+        for a in range(3):
+            centre[a] += p[k, a]
+    centre /= n
+    cov = np.zeros((3, 3))
+    for k in range(n):
+        q0, q1, q2 = p[k, 0] - centre[0], p[k, 1] - centre[1], p[k, 2] - centre[2]
+        cov[0, 0] += q0 * q0
+        cov[0, 1] += q0 * q1
+        cov[0, 2] += q0 * q2
+        cov[1, 1] += q1 * q1
+        cov[1, 2] += q1 * q2
+        cov[2, 2] += q2 * q2
+    cov[1, 0], cov[2, 0], cov[2, 1] = cov[0, 1], cov[0, 2], cov[1, 2]
+    cov /= n
+    val, vec = np.linalg.eigh(cov)
+    gain = np.empty(3)
+    for a in range(3):
+        gain[a] = max(val[a] - noise, 0.0) / max(val[a], 1e-300)
+    A = np.zeros((3, 3))  # vec diag(gain) vec^T
+    for a in range(3):
+        for b in range(3):
+            for c in range(3):
+                A[a, b] += vec[a, c] * gain[c] * vec[b, c]
+    out = np.empty((n, 3))
+    for k in range(n):
+        q0, q1, q2 = p[k, 0] - centre[0], p[k, 1] - centre[1], p[k, 2] - centre[2]
+        for b in range(3):
+            out[k, b] = centre[b] + q0 * A[0, b] + q1 * A[1, b] + q2 * A[2, b]
+    return out
+
+
+@_inner
+def _add_to_box(count, box, v, i, j):
+    """Count pixel (i, j) for id v and widen its box."""
+    count[v] += 1
+    if i < box[v, 0]:
+        box[v, 0] = i
+    box[v, 1] = i + 1
+    if j < box[v, 2]:
+        box[v, 2] = j
+    if j + 1 > box[v, 3]:
+        box[v, 3] = j + 1
+
+
+@kernel
+def _few_ids_k(raw, itemsize, top):
+    """Pixel count and half-open box (row0, row1, col0, col1) of each id 1..top in a mask of
+    ``itemsize``-byte little-endian integers seen as bytes ``raw``; other values (negative
+    ones have high bytes 0xff) are ignored. Bytes, so that one compiled signature serves every
+    integer type."""
+    h = raw.shape[0]
+    w = raw.shape[1] // itemsize
+    count = np.zeros(top + 1, np.int64)
+    box = np.zeros((top + 1, 4), np.int64)
+    for v in range(top + 1):
+        box[v, 0], box[v, 2] = h, w
+    for i in range(h):
+        row = raw[i]
+        if itemsize == 1:
+            for j in range(w):
+                v = np.int64(row[j])
+                if v != 0 and v <= top:
+                    _add_to_box(count, box, v, i, j)
+        elif itemsize == 2:
+            for j in range(w):
+                v = np.int64(row[2 * j]) | (np.int64(row[2 * j + 1]) << 8)
+                if v != 0 and v <= top:
+                    _add_to_box(count, box, v, i, j)
+        elif itemsize == 4:
+            for j in range(w):
+                o = 4 * j
+                v = (np.int64(row[o]) | (np.int64(row[o + 1]) << 8)
+                     | (np.int64(row[o + 2]) << 16) | (np.int64(row[o + 3]) << 24))
+                if v != 0 and v <= top:
+                    _add_to_box(count, box, v, i, j)
+        else:
+            for j in range(w):
+                o = j * itemsize
+                v = np.int64(row[o])
+                if v != 0 and v <= top:
+                    high = False
+                    for b in range(1, itemsize):
+                        if row[o + b] != 0:
+                            high = True
+                    if not high:
+                        _add_to_box(count, box, v, i, j)
+    return count, box
