@@ -42,6 +42,15 @@ def kernel(fn):
     return compiled_fn
 
 
+def kernel_helper(fn):
+    """Compile a function that kernels call (not Python): like :func:`kernel`, but not listed in
+    KERNELS, because a kernel loaded from the disk cache carries its helpers' code compiled into
+    it and leaves the helpers themselves uncompiled."""
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+
+
 def warm_up() -> float:
     """Compile (or load from the cache) every kernel by estimating one small synthetic frame;
     returns the seconds it took. A no-op when the kernels are not used."""

@@ -37,7 +37,7 @@ from scipy import ndimage
 
 from . import compiled
 from .camera import image_centre
-from .compiled import kernel
+from .compiled import kernel, kernel_helper
 from .robust import MAD_TO_SIGMA
 
 
@@ -577,15 +577,7 @@ def calibrated_nocs(inst: Instance) -> Instance:
 # giving what _extract_mosaic gives for it, selections bit for bit (box sums are formed exactly
 # in float64 and rounded to float32, as OpenCV's box filter does; medians are np.median's).
 
-def _inner(fn):
-    """A helper of a kernel: compiled like one but not listed in compiled.KERNELS, because a
-    kernel loaded from the disk cache holds its helpers' code and leaves them uncompiled."""
-    if compiled.numba is None:
-        return fn
-    return compiled.numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
-
-
-@_inner
+@kernel_helper
 def _median_k(v, n):
     """np.median of v[:n] (n > 0) by selection (Hoare's find); reorders v[:n]."""
     k = n // 2
@@ -617,7 +609,7 @@ def _median_k(v, n):
     return 0.5 * (below + v[k])
 
 
-@_inner
+@kernel_helper
 def _thin_median_k(buf, n, scratch):
     """_median(_thin(buf[:n])) (n > 0), using scratch; buf is left as it is."""
     step = n // 600 if n > 1200 else 1
@@ -628,7 +620,7 @@ def _thin_median_k(buf, n, scratch):
     return _median_k(scratch, m)
 
 
-@_inner
+@kernel_helper
 def _second_diff_sigmas_k(V, ok, bufs, scratch, scratch2, out):
     """_second_diff_sigma of each of the planes V[:4] with the valid pixels ``ok`` into out[:4]
     (the second differences of all four gathered in one pass; bufs: (4, n) scratch)."""
@@ -663,7 +655,7 @@ def _second_diff_sigmas_k(V, ok, bufs, scratch, scratch2, out):
         out[c] = MAD_TO_SIGMA * _median_k(scratch2, m) / np.sqrt(6.0)
 
 
-@_inner
+@kernel_helper
 def _box_sums_k(ok, V, nch, rad, R, S):
     """Box sums over the pixels ``ok`` in a (2 rad+1)^2 window: S[0] their count, S[c+1] the
     sum of plane V[c] rounded to float32 (R: scratch of S's shape), by running sums along
@@ -702,7 +694,7 @@ def _box_sums_k(ok, V, nch, rad, R, S):
                     acc[j] -= R[c, i - rad, j]
 
 
-@_inner
+@kernel_helper
 def _box_remove_k(S, V, nch, rad, i, j):
     """Take pixel (i, j) out of the box sums S of _box_sums_k."""
     h, w = S.shape[1], S.shape[2]
@@ -716,7 +708,7 @@ def _box_remove_k(S, V, nch, rad, i, j):
                 S[c + 1, ii, jj] -= v
 
 
-@_inner
+@kernel_helper
 def _box_mean_k(S, c, i, j):
     """_local_means's mean of plane c at (i, j) from the box sums S: float32 quotient of the
     float32-rounded sums, widened."""
@@ -724,7 +716,7 @@ def _box_mean_k(S, c, i, j):
     return np.float64(np.float32(np.float32(S[c + 1, i, j]) / den))
 
 
-@_inner
+@kernel_helper
 def _gather_k(plane, ok, buf):
     """plane[ok] (row-major) into buf; returns the count."""
     h, w = ok.shape
@@ -938,7 +930,7 @@ def _calibrated_nocs_k(p, noise):
     return out
 
 
-@_inner
+@kernel_helper
 def _add_to_box(count, box, v, i, j):
     """Count pixel (i, j) for id v and widen its box."""
     count[v] += 1
