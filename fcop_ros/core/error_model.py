@@ -39,54 +39,67 @@ def depth_influence(instances, fits: ObjectFits, max_pixels: int = 300,
     if o == 0:
         return out
     m = min(max(len(i.d) for i in instances), max_pixels)
-    X = np.zeros((o, m, 2))
+    X = np.zeros((o, 2, m))
     D = np.ones((o, m))
-    P = np.zeros((o, m, 3))
+    P = np.zeros((o, 3, m))
     V = np.zeros((o, m))
     for k, inst in enumerate(instances):
         n = len(inst.d)
-        pick = np.linspace(0, n - 1, min(n, m)).astype(np.intp) if n > m else np.arange(n)
-        X[k, : len(pick)], D[k, : len(pick)] = inst.x[pick], inst.d[pick]
-        P[k, : len(pick)] = inst.p[pick] - 0.5
+        pick = (np.arange(m) * (n - 1)) // max(m - 1, 1) if n > m else np.arange(n)
+        X[k, :, : len(pick)], D[k, : len(pick)] = inst.x[pick].T, inst.d[pick]
+        P[k, :, : len(pick)] = inst.p[pick].T - 0.5
         V[k, : len(pick)] = 1.0
     cnt = np.maximum(V.sum(1), 1.0)
-    cen = (X * V[..., None]).sum(1) / cnt[:, None]
-    span = np.sqrt((((X - cen[:, None]) ** 2).sum(-1) * V).sum(1) / cnt)
-    U = (X - cen[:, None]) / np.maximum(span, 1e-9)[:, None, None]
+    cen = (X * V[:, None]).sum(2) / cnt[:, None]
+    Xr = X - cen[:, :, None]
+    span = np.sqrt(((Xr * Xr).sum(1) * V).sum(1) / cnt)
+    U = Xr / np.maximum(span, 1e-9)[:, None, None]  # (O, 2, M)
 
-    f = fits.focal
-    q = np.einsum("oij,omj->omi", fits.rotation * fits.scale[:, None, None], P)
-    Xc = q + fits.translation[:, None, :]
-    z = np.where(np.abs(Xc[..., 2]) > 1e-9, Xc[..., 2], 1e-9)
-    a = f[:, None] / z
-    u, v = Xc[..., 0] * a, Xc[..., 1] * a
-    uz, vz = u / z, v / z
-    gain = 1.0 + (U * fits.tilt[:, None, :]).sum(-1)
-    ru, rv, rd = X[..., 0] - u, X[..., 1] - v, D - z * gain
+    # Predictions at the fit: q = s R (p - 0.5), X = q + t, (u, v) = f X_xy / z, d = z gain.
+    q = (fits.rotation * fits.scale[:, None, None]) @ P  # (O, 3, M)
+    Xc = q + fits.translation[:, :, None]
+    z = np.where(np.abs(Xc[:, 2]) > 1e-9, Xc[:, 2], 1e-9)
+    a = fits.focal[:, None] / z
+    uv = Xc[:, :2] * a[:, None]
+    uvz = uv / z[:, None]
+    gain = 1.0 + (U * fits.tilt[:, :, None]).sum(1)
+    r_uv = X - uv
+    r_d = D - z * gain
     sp = np.maximum(fits.sigma_px, 1e-6)[:, None]
     sd = np.maximum(fits.sigma_depth, 1e-12)[:, None]
-    e2 = (ru**2 + rv**2) / (2 * sp**2) + rd**2 / sd**2
-    w = V / (1.0 + e2 / _CAUCHY**2)
-    wu, wd = w / sp**2, w / sd**2
+    e2 = (r_uv * r_uv).sum(1) / (2 * sp**2) + r_d**2 / sd**2
+    sw = np.sqrt(V / (1.0 + e2 / _CAUCHY**2))
+    su, sdw = sw / sp, sw / sd  # square roots of the rows' weights w / sigma^2
 
-    # The Jacobian of the predictions (u, v, d) in [log f, log s, w (3), t (3), tilt (2)], as in
-    # the fit, each (O, 10, M).
-    qx, qy, qz = q[..., 0], q[..., 1], q[..., 2]
-    zero = np.zeros_like(z)
-    Ju = np.stack([u, a * qx - uz * qz, -uz * qy, a * qz + uz * qx, -a * qy,
-                   a, zero, -uz, zero, zero], 1)
-    Jv = np.stack([v, a * qy - vz * qz, -a * qz - vz * qy, vz * qx, a * qx,
-                   zero, a, -vz, zero, zero], 1)
-    Jd = np.stack([zero, gain * qz, gain * qy, -gain * qx, zero,
-                   zero, zero, gain, z * U[..., 0], z * U[..., 1]], 1)
-    H = ((Ju * wu[:, None]) @ np.swapaxes(Ju, 1, 2) + (Jv * wu[:, None]) @ np.swapaxes(Jv, 1, 2)
-         + (Jd * wd[:, None]) @ np.swapaxes(Jd, 1, 2))
-    if not depth_tilt:  # the fit had no tilt nuisance: drop its two parameters
-        H, Jd = H[:, :8, :8], Jd[:, :8]
-
+    # The Jacobian of the predictions (u, v, d) in [log f, log s, w (3), t (3), tilt (2)] as in
+    # the fit, scaled by the square roots of the row weights: (O, 10, 3, M).
+    npar = 10 if depth_tilt else 8
+    J = np.zeros((o, npar, 3, m))
+    aq = q * (a * su)[:, None]
+    B = (uvz * su[:, None])[:, :, None] * q[:, None]  # (O, 2, 3, M): [uz, vz] x [qx, qy, qz]
+    gq = q * (gain * sdw)[:, None]
+    J[:, 0, :2] = uv * su[:, None]
+    J[:, 1, :2] = aq[:, :2] - B[:, :, 2]
+    J[:, 1, 2] = gq[:, 2]
+    J[:, 2, :2] = -B[:, :, 1]
+    J[:, 2, 1] -= aq[:, 2]
+    J[:, 2, 2] = gq[:, 1]
+    J[:, 3, :2] = B[:, :, 0]
+    J[:, 3, 0] += aq[:, 2]
+    J[:, 3, 2] = -gq[:, 0]
+    J[:, 4, 0] = -aq[:, 1]
+    J[:, 4, 1] = aq[:, 0]
+    J[:, 5, 0] = a * su
+    J[:, 6, 1] = a * su
+    J[:, 7, :2] = -uvz * su[:, None]
+    J[:, 7, 2] = gain * sdw
+    if depth_tilt:
+        J[:, 8:, 2] = U * (z * sdw)[:, None]
+    Jf = J.reshape(o, npar, 3 * m)
+    H = Jf @ np.swapaxes(Jf, 1, 2)
     zm = (z * V).sum(1) / cnt
-    phi = np.stack([z - zm[:, None], np.ones_like(z)], -1)  # (O, M, patterns)
-    G = (Jd * wd[:, None]) @ phi  # (O, npar, patterns)
+    phi = np.stack([(z - zm[:, None]) * sdw, sdw], -1)  # (O, M, patterns), weighted
+    G = J[:, :, 2] @ phi  # J_d^T W_d phi: (O, npar, patterns)
     with np.errstate(all="ignore"):
         try:
             dtheta = np.linalg.solve(H, G)
