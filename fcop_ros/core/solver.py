@@ -7,11 +7,15 @@ with K = diag(f, f, 1) gives, after differencing (removes t) and taking norms (r
     s^2 ||p_a - p_b||^2 - ||d_a x_a - d_b x_b||^2 / f^2 = (d_a - d_b)^2
 
 A triplet (i, j, k) gives three such rows for the pairs (i,j), (j,k), (i,k), linear in the
-unknowns (s^2, 1/f^2). Everything here is vectorised over triplets (a chunk at a time).
+unknowns (s^2, 1/f^2). The numpy path is vectorised over triplets (a chunk at a time); the
+compiled kernel (:mod:`.compiled`) makes one pass over them with the same arithmetic in the
+same order, so both give the same bits.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from . import compiled
 
 # A triplet whose 2x2 normal matrix is closer to singular than this (its determinant relative
 # to the product of its diagonal, which is unit-free) does not determine (s^2, 1/f^2) and is
@@ -47,6 +51,11 @@ def solve_triplets(x: np.ndarray, d: np.ndarray, p: np.ndarray, triplets: np.nda
 
     t = tri.shape[0]
     focal, scale_sq, valid = np.empty(t), np.empty(t), np.empty(t, dtype=bool)
+    if compiled.ENABLED:
+        # Contiguous inputs: one compiled signature, whatever views the caller passes.
+        _solve_kernel(np.ascontiguousarray(x), np.ascontiguousarray(d), np.ascontiguousarray(p),
+                      np.ascontiguousarray(tri), focal, scale_sq, valid)
+        return focal, scale_sq, valid
     # Every pair term is written out per component on 1-D columns (reductions over a length-2/3
     # last axis are slow in numpy), a chunk of triplets at a time so that the temporaries stay
     # in cache; the columns are gathered straight from the (strided) input, which is not copied.
@@ -120,6 +129,69 @@ def _solve_chunk(cols, idx, focal, scale_sq, valid):
     focal[bad] = 0.0
     scale_sq[bad] = 0.0
     valid[...] = ok
+
+
+@compiled.kernel
+def _solve_one(x, d, p, i, j, k):
+    """One triplet's (focal, scale_sq, valid): ``_solve_chunk``'s arithmetic, operation for
+    operation (no fused multiply-adds), so its result has the same bits."""
+    # Camera-plane points d x of the three points.
+    ax, ay = x[i, 0] * d[i], x[i, 1] * d[i]
+    bx, by = x[j, 0] * d[j], x[j, 1] * d[j]
+    cx, cy = x[k, 0] * d[k], x[k, 1] * d[k]
+    # The three rows, pairs (i,j), (j,k), (i,k): NOCS, image and depth squared distances.
+    n0 = _sq3(p[i, 0] - p[j, 0], p[i, 1] - p[j, 1], p[i, 2] - p[j, 2])
+    n1 = _sq3(p[j, 0] - p[k, 0], p[j, 1] - p[k, 1], p[j, 2] - p[k, 2])
+    n2 = _sq3(p[i, 0] - p[k, 0], p[i, 1] - p[k, 1], p[i, 2] - p[k, 2])
+    m0 = _sq2(ax - bx, ay - by)
+    m1 = _sq2(bx - cx, by - cy)
+    m2 = _sq2(ax - cx, ay - cy)
+    c0 = (d[i] - d[j]) * (d[i] - d[j])
+    c1 = (d[j] - d[k]) * (d[j] - d[k])
+    c2 = (d[i] - d[k]) * (d[i] - d[k])
+    na = np.sqrt(_dot3s(n0, n1, n2, n0, n1, n2))
+    nb = np.sqrt(_dot3s(m0, m1, m2, m0, m1, m2))
+    a0, a1, a2 = n0 / na, n1 / na, n2 / na
+    b0, b1, b2 = m0 / nb, m1 / nb, m2 / nb
+    saa = _dot3s(a0, a1, a2, a0, a1, a2)
+    sbb = _dot3s(b0, b1, b2, b0, b1, b2)
+    sab = _dot3s(a0, a1, a2, b0, b1, b2)
+    sac = _dot3s(a0, a1, a2, c0, c1, c2)
+    sbc = _dot3s(b0, b1, b2, c0, c1, c2)
+    det = saa * sbb - sab * sab
+    ok = det > _DEGENERATE_REL_DET * saa * sbb
+    s2 = (sbb * sac - sab * sbc) / det / na
+    w = (sab * sac - saa * sbc) / det / nb
+    f = 1.0 / np.sqrt(w)
+    # Without branches (& not and): the pass then runs at one speed however many are invalid.
+    ok = ok & np.isfinite(s2) & np.isfinite(w) & (s2 > 0) & (w > 0) & np.isfinite(f)
+    return (f if ok else 0.0), (s2 if ok else 0.0), ok
+
+
+@compiled.kernel
+def _sq3(u, v, w):
+    """u^2 + v^2 + w^2, summed left to right as ``_square_distance`` does."""
+    return u * u + v * v + w * w
+
+
+@compiled.kernel
+def _sq2(u, v):
+    """u^2 + v^2."""
+    return u * u + v * v
+
+
+@compiled.kernel
+def _dot3s(u0, u1, u2, v0, v1, v2):
+    """u . v of scalars, summed left to right as ``_dot3`` does."""
+    return u0 * v0 + u1 * v1 + u2 * v2
+
+
+@compiled.kernel
+def _solve_kernel(x, d, p, tri, focal, scale_sq, valid):
+    """``solve_triplets``'s compiled path: every triplet of tri (T, 3) into focal, scale_sq and
+    valid (T,), in one pass that keeps nothing but the triplet's own numbers."""
+    for t in range(tri.shape[0]):
+        focal[t], scale_sq[t], valid[t] = _solve_one(x, d, p, tri[t, 0], tri[t, 1], tri[t, 2])
 
 
 def sample_triplets(n: int, count: int, rng: np.random.Generator) -> np.ndarray:
