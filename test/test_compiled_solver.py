@@ -4,8 +4,8 @@ on random triplets of shared points and on degenerate ones."""
 import numpy as np
 import pytest
 
-from fcop_ros.core import compiled, solver
-from fcop_ros.synthetic import simulate_triplet_batch
+from fcop_ros.core import compiled, solver, stabbing
+from fcop_ros.synthetic import simulate_points, simulate_triplet_batch
 
 pytestmark = pytest.mark.skipif(compiled.numba is None, reason="numba is not installed")
 
@@ -83,3 +83,64 @@ def test_strided_inputs_agree(monkeypatch):
     fast, slow = _both_ways(monkeypatch, lambda: solver.solve_triplets(
         big[:, :2], big[:, 2], big[:, 3:], tri))
     _assert_same_solution(fast, slow)
+
+
+def _objects(rng, sizes):
+    out = []
+    for n in sizes:
+        t = simulate_points(rng, n, depth_noise=0.002, nocs_noise=0.01)
+        out.append((t.x, t.d, t.p))
+    return out
+
+
+def test_object_votes_agree(monkeypatch):
+    """The estimator's vote stage: the same draws (the generator ends in the same state), the
+    same votes in the same order, the same owners; an object of two points draws nothing."""
+    objects = _objects(np.random.default_rng(15), (40, 2, 700, 3, 150))
+    xs, ds, ps = zip(*objects)
+
+    def votes():
+        rng = np.random.default_rng(16)
+        f, owner = solver.object_votes(xs, ds, ps, 900, rng, (300.0, 1500.0))
+        return f, owner, rng.integers(2**62)
+
+    (f1, o1, next1), (f2, o2, next2) = _both_ways(monkeypatch, votes)
+    assert next1 == next2
+    np.testing.assert_array_equal(o1, o2)
+    np.testing.assert_allclose(f1, f2, rtol=1e-12, atol=0)
+    assert set(o1.tolist()) == {0, 2, 3, 4} and ((f1 >= 300) & (f1 <= 1500)).all()
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 300, 5000, 40_000])
+def test_stabbing_agrees(monkeypatch, n):
+    """The compiled deepest start (a merge of the sorted ends) against numpy's searches, both
+    stabbing functions: spread, clustered and tied votes (rounded: many equal ends, intervals
+    that only touch), with a few non-finite ones."""
+    rng = np.random.default_rng(17 + n)
+    for votes in (np.exp(rng.normal(6.4, 0.3, n)), np.exp(rng.normal(6.4, 0.01, n)),
+                  np.round(rng.normal(600, 40, n), -1), rng.integers(0, 4, n) * 10.0 + 500):
+        votes[rng.random(n) < 0.01] = np.nan
+        c, r = np.log(votes), np.log1p(0.05)
+
+        def both():
+            return [stabbing.stab_equal_width(c, r), stabbing.interval_stabbing(c - r, c + r),
+                    stabbing.interval_stabbing(votes - 10.0, votes + 10.0)]
+
+        fast, slow = _both_ways(monkeypatch, both)
+        for a, b in zip(fast, slow):
+            assert (a.point, a.count, a.region) == (b.point, b.count, b.region)
+            np.testing.assert_array_equal(a.inliers, b.inliers)
+
+
+def test_warm_up_compiles_what_solve_triplets_runs(monkeypatch):
+    """solve_triplets, whatever views and integer types it gets, runs the kernel signature that
+    the warm-up (the estimator's votes) compiled: no compilation waits in a later call."""
+    monkeypatch.setattr(compiled, "ENABLED", True)
+    compiled.warm_up()
+    before = list(solver._triplets_kernel.signatures)
+    rng = np.random.default_rng(18)
+    x, d, p, _, _ = simulate_triplet_batch(rng, 50)
+    big = np.concatenate([x.reshape(-1, 2), d.reshape(-1, 1), p.reshape(-1, 3)], axis=1)
+    solver.solve_triplets(big[:, :2], big[:, 2], big[:, 3:],
+                          solver.sample_triplets(150, 10, rng).astype(np.int32)[::2])
+    assert solver._triplets_kernel.signatures == before and len(before) == 1

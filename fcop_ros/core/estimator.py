@@ -21,7 +21,7 @@ from .camera import image_centre
 from .correspondences import Instance, calibrated_nocs, check_images, extract_instances
 from .object_fit import fit_objects
 from .pose import ObjectPose, umeyama
-from .solver import sample_triplets, solve_triplets
+from .solver import object_votes, solve_triplets
 from .options import EstimatorOptions
 from .stabbing import interval_stabbing, stab_equal_width
 
@@ -72,20 +72,9 @@ class FocalEstimate:
 
 def _votes(instances: list[Instance], opt: EstimatorOptions, rng: np.random.Generator):
     """Minimal-solver votes of every object, solved in one call: (focal (V,), owner index (V,))."""
-    lo, hi = opt.focal_range
-    sizes = np.array([len(inst.d) for inst in instances])
-    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    n_tri = int(opt.triplets_per_object)
-    tri = np.concatenate(
-        [sample_triplets(int(n), n_tri, rng) + off for n, off in zip(sizes, offsets)]
-    )
-    owner = np.repeat(np.arange(len(instances)), [n_tri if n >= 3 else 0 for n in sizes])
-    x = np.concatenate([inst.x for inst in instances])
-    d = np.concatenate([inst.d for inst in instances])
-    p = np.concatenate([inst.p for inst in instances])
-    f, _, ok = solve_triplets(x, d, p, tri)
-    ok &= (f >= lo) & (f <= hi)
-    return f[ok], owner[ok]
+    return object_votes([inst.x for inst in instances], [inst.d for inst in instances],
+                        [inst.p for inst in instances], int(opt.triplets_per_object), rng,
+                        opt.focal_range)
 
 
 def estimate_poses(

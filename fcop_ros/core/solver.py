@@ -53,8 +53,10 @@ def solve_triplets(x: np.ndarray, d: np.ndarray, p: np.ndarray, triplets: np.nda
     focal, scale_sq, valid = np.empty(t), np.empty(t), np.empty(t, dtype=bool)
     if compiled.ENABLED:
         # Contiguous inputs: one compiled signature, whatever views the caller passes.
-        _solve_kernel(np.ascontiguousarray(x), np.ascontiguousarray(d), np.ascontiguousarray(p),
-                      np.ascontiguousarray(tri), focal, scale_sq, valid)
+        _triplets_kernel(np.ascontiguousarray(x), np.ascontiguousarray(d),
+                         np.ascontiguousarray(p), np.ascontiguousarray(tri),
+                         np.array([x.shape[0]], dtype=np.intp), t, False, -np.inf, np.inf,
+                         focal, scale_sq, valid, np.empty(0, dtype=np.intp))
         return focal, scale_sq, valid
     # Every pair term is written out per component on 1-D columns (reductions over a length-2/3
     # last axis are slow in numpy), a chunk of triplets at a time so that the temporaries stay
@@ -132,77 +134,128 @@ def _solve_chunk(cols, idx, focal, scale_sq, valid):
 
 
 @compiled.kernel
-def _solve_one(x, d, p, i, j, k):
-    """One triplet's (focal, scale_sq, valid): ``_solve_chunk``'s arithmetic, operation for
-    operation (no fused multiply-adds), so its result has the same bits."""
-    # Camera-plane points d x of the three points.
-    ax, ay = x[i, 0] * d[i], x[i, 1] * d[i]
-    bx, by = x[j, 0] * d[j], x[j, 1] * d[j]
-    cx, cy = x[k, 0] * d[k], x[k, 1] * d[k]
-    # The three rows, pairs (i,j), (j,k), (i,k): NOCS, image and depth squared distances.
-    n0 = _sq3(p[i, 0] - p[j, 0], p[i, 1] - p[j, 1], p[i, 2] - p[j, 2])
-    n1 = _sq3(p[j, 0] - p[k, 0], p[j, 1] - p[k, 1], p[j, 2] - p[k, 2])
-    n2 = _sq3(p[i, 0] - p[k, 0], p[i, 1] - p[k, 1], p[i, 2] - p[k, 2])
-    m0 = _sq2(ax - bx, ay - by)
-    m1 = _sq2(bx - cx, by - cy)
-    m2 = _sq2(ax - cx, ay - cy)
-    c0 = (d[i] - d[j]) * (d[i] - d[j])
-    c1 = (d[j] - d[k]) * (d[j] - d[k])
-    c2 = (d[i] - d[k]) * (d[i] - d[k])
-    na = np.sqrt(_dot3s(n0, n1, n2, n0, n1, n2))
-    nb = np.sqrt(_dot3s(m0, m1, m2, m0, m1, m2))
-    a0, a1, a2 = n0 / na, n1 / na, n2 / na
-    b0, b1, b2 = m0 / nb, m1 / nb, m2 / nb
-    saa = _dot3s(a0, a1, a2, a0, a1, a2)
-    sbb = _dot3s(b0, b1, b2, b0, b1, b2)
-    sab = _dot3s(a0, a1, a2, b0, b1, b2)
-    sac = _dot3s(a0, a1, a2, c0, c1, c2)
-    sbc = _dot3s(b0, b1, b2, c0, c1, c2)
-    det = saa * sbb - sab * sab
-    ok = det > _DEGENERATE_REL_DET * saa * sbb
-    s2 = (sbb * sac - sab * sbc) / det / na
-    w = (sab * sac - saa * sbc) / det / nb
-    f = 1.0 / np.sqrt(w)
-    # Without branches (& not and): the pass then runs at one speed however many are invalid.
-    ok = ok & np.isfinite(s2) & np.isfinite(w) & (s2 > 0) & (w > 0) & np.isfinite(f)
-    return (f if ok else 0.0), (s2 if ok else 0.0), ok
+def _triplets_kernel(x, d, p, tri, sizes, count, shift, lo, hi, focal, scale_sq, valid, owner):
+    """The compiled triplet solve: one pass, ``_solve_chunk``'s arithmetic operation for
+    operation in the same order (no fused multiply-adds), so its numbers have the same bits.
 
-
-@compiled.kernel
-def _sq3(u, v, w):
-    """u^2 + v^2 + w^2, summed left to right as ``_square_distance`` does."""
-    return u * u + v * v + w * w
-
-
-@compiled.kernel
-def _sq2(u, v):
-    """u^2 + v^2."""
-    return u * u + v * v
-
-
-@compiled.kernel
-def _dot3s(u0, u1, u2, v0, v1, v2):
-    """u . v of scalars, summed left to right as ``_dot3`` does."""
-    return u0 * v0 + u1 * v1 + u2 * v2
-
-
-@compiled.kernel
-def _solve_kernel(x, d, p, tri, focal, scale_sq, valid):
-    """``solve_triplets``'s compiled path: every triplet of tri (T, 3) into focal, scale_sq and
-    valid (T,), in one pass that keeps nothing but the triplet's own numbers."""
-    for t in range(tri.shape[0]):
-        focal[t], scale_sq[t], valid[t] = _solve_one(x, d, p, tri[t, 0], tri[t, 1], tri[t, 2])
+    tri holds ``count`` rows (i, j, k) for each of the objects whose points lie one after another
+    in x, d, p, sizes[o] points each. ``solve_triplets`` passes its triplets as one object and
+    gets every result at its row (owner empty). ``object_votes`` passes raw draws
+    (``shift``: made distinct as ``sample_triplets`` does, no rows for objects of fewer than
+    three points) and gets only the valid focal lengths in [lo, hi], packed to the front with
+    their object in owner. Returns the number of results written.
+    """
+    m = 0
+    start = 0
+    t = 0
+    for o in range(sizes.size):
+        n = sizes[o]
+        if shift and n < 3:
+            start += n
+            continue
+        for _ in range(count):
+            i, j, k = tri[t, 0], tri[t, 1], tri[t, 2]
+            t += 1
+            if shift:  # sample_triplets' shifts, one triplet at a time
+                j += 1 if j >= i else 0
+                k += 1 if k >= min(i, j) else 0
+                k += 1 if k >= max(i, j) else 0
+            i, j, k = start + i, start + j, start + k
+            # Camera-plane points d x; rows of the pairs (i,j), (j,k), (i,k).
+            ax, ay = x[i, 0] * d[i], x[i, 1] * d[i]
+            bx, by = x[j, 0] * d[j], x[j, 1] * d[j]
+            cx, cy = x[k, 0] * d[k], x[k, 1] * d[k]
+            u, v, w = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1], p[i, 2] - p[j, 2]
+            n0 = u * u + v * v + w * w
+            u, v, w = p[j, 0] - p[k, 0], p[j, 1] - p[k, 1], p[j, 2] - p[k, 2]
+            n1 = u * u + v * v + w * w
+            u, v, w = p[i, 0] - p[k, 0], p[i, 1] - p[k, 1], p[i, 2] - p[k, 2]
+            n2 = u * u + v * v + w * w
+            m0 = (ax - bx) * (ax - bx) + (ay - by) * (ay - by)
+            m1 = (bx - cx) * (bx - cx) + (by - cy) * (by - cy)
+            m2 = (ax - cx) * (ax - cx) + (ay - cy) * (ay - cy)
+            c0 = (d[i] - d[j]) * (d[i] - d[j])
+            c1 = (d[j] - d[k]) * (d[j] - d[k])
+            c2 = (d[i] - d[k]) * (d[i] - d[k])
+            na = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            nb = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+            a0, a1, a2 = n0 / na, n1 / na, n2 / na
+            b0, b1, b2 = m0 / nb, m1 / nb, m2 / nb
+            saa = a0 * a0 + a1 * a1 + a2 * a2
+            sbb = b0 * b0 + b1 * b1 + b2 * b2
+            sab = a0 * b0 + a1 * b1 + a2 * b2
+            sac = a0 * c0 + a1 * c1 + a2 * c2
+            sbc = b0 * c0 + b1 * c1 + b2 * c2
+            det = saa * sbb - sab * sab
+            s2 = (sbb * sac - sab * sbc) / det / na
+            w = (sab * sac - saa * sbc) / det / nb
+            f = 1.0 / np.sqrt(w)
+            # Without branches (& not and): one speed however many triplets are invalid.
+            ok = ((det > _DEGENERATE_REL_DET * saa * sbb) & np.isfinite(s2) & np.isfinite(w)
+                  & (s2 > 0) & (w > 0) & np.isfinite(f))
+            if owner.size == 0:
+                focal[m] = f if ok else 0.0
+                scale_sq[m] = s2 if ok else 0.0
+                valid[m] = ok
+                m += 1
+            elif ok and f >= lo and f <= hi:
+                focal[m] = f
+                scale_sq[m] = s2
+                valid[m] = True
+                owner[m] = o
+                m += 1
+        start += n
+    return m
 
 
 def sample_triplets(n: int, count: int, rng: np.random.Generator) -> np.ndarray:
     """Draw ``count`` triplets of distinct indices in [0, n) uniformly (the paper's sampling)."""
     if n < 3 or count <= 0:
         return np.empty((0, 3), dtype=np.intp)
-    i = rng.integers(0, n, count)
-    j = rng.integers(0, n - 1, count)
+    i, j, k = _draw(n, count, rng)
     j += j >= i
-    k = rng.integers(0, n - 2, count)
     lo, hi = np.minimum(i, j), np.maximum(i, j)
     k += k >= lo
     k += k >= hi
     return np.stack([i, j, k], axis=1)
+
+
+def _draw(n: int, count: int, rng: np.random.Generator):
+    """The random numbers of ``sample_triplets`` (n >= 3): i in [0, n), j in [0, n-1) and
+    k in [0, n-2), which it then shifts past the smaller indices to make them distinct."""
+    i = rng.integers(0, n, count)
+    j = rng.integers(0, n - 1, count)
+    k = rng.integers(0, n - 2, count)
+    return i, j, k
+
+
+def object_votes(xs, ds, ps, count: int, rng: np.random.Generator, focal_range):
+    """The estimator's votes: ``count`` random triplets on every object (``sample_triplets``,
+    object after object, from ``rng``), solved; the valid focal lengths inside focal_range.
+
+    xs, ds, ps: per object its x (N_o,2), d (N_o,) and p (N_o,3) as for ``solve_triplets``;
+    objects of fewer than three points draw nothing. Returns (focal (V,), owner (V,)), owner
+    the index of the vote's object. The compiled path draws the same numbers and solves each
+    triplet as it shifts it, without the triplet array or the invalid votes.
+    """
+    lo, hi = (float(v) for v in focal_range)
+    count = max(int(count), 0)
+    sizes = [len(v) for v in ds]
+    x, d, p = (np.ascontiguousarray(np.concatenate(v), dtype=np.float64) for v in (xs, ds, ps))
+    if compiled.ENABLED:
+        big = [n for n in sizes if n >= 3]
+        raw = np.empty((len(big) * count, 3), dtype=np.intp)
+        for b, n in enumerate(big):
+            for c, draw in enumerate(_draw(n, count, rng)):
+                raw[b * count:(b + 1) * count, c] = draw
+        focal, scale_sq = np.empty(raw.shape[0]), np.empty(raw.shape[0])
+        valid, owner = np.empty(raw.shape[0], dtype=bool), np.empty(raw.shape[0], dtype=np.intp)
+        m = _triplets_kernel(x, d, p, raw, np.array(sizes, dtype=np.intp), count, True, lo, hi,
+                             focal, scale_sq, valid, owner)
+        return focal[:m].copy(), owner[:m].copy()
+    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+    tri = np.concatenate([sample_triplets(n, count, rng) + off for n, off in zip(sizes, offsets)])
+    owner = np.repeat(np.arange(len(sizes)), [count if n >= 3 else 0 for n in sizes])
+    f, _, ok = solve_triplets(x, d, p, tri)
+    ok &= (f >= lo) & (f <= hi)
+    return f[ok], owner[ok]
