@@ -1,13 +1,14 @@
-"""The compiled triplet solve (fcop_ros.core.solver) against its numpy path: the same validity and
-the same focal and scale_sq (to 1e-12 relative; in practice the same bits) on simulated triplets,
-on random triplets of shared points and on degenerate ones."""
+"""The compiled kernels of the vote stage against their numpy paths: the triplet solve (the same
+validity, focal and scale_sq to 1e-12 relative; in practice the same bits) on simulated, shared,
+degenerate and strided inputs; the estimator's votes (the same draws and votes); the stabbing's
+deepest start. And combine's Python-float sums, which must give numpy's bits."""
 import numpy as np
 import pytest
 
-from fcop_ros.core import compiled, solver, stabbing
+from fcop_ros.core import combine, compiled, solver, stabbing
 from fcop_ros.synthetic import simulate_points, simulate_triplet_batch
 
-pytestmark = pytest.mark.skipif(compiled.numba is None, reason="numba is not installed")
+needs_numba = pytest.mark.skipif(compiled.numba is None, reason="numba is not installed")
 
 
 def _both_ways(monkeypatch, fn):
@@ -43,6 +44,7 @@ def _degenerate_points(rng):
     return x, d, p, tri
 
 
+@needs_numba
 def test_simulated_triplets_agree(monkeypatch):
     rng = np.random.default_rng(11)
     n = 20_000
@@ -54,6 +56,7 @@ def test_simulated_triplets_agree(monkeypatch):
     assert fast[2].mean() > 0.999
 
 
+@needs_numba
 def test_random_triplets_of_shared_points_agree(monkeypatch):
     """The estimator's pattern: many triplets of a few points, about half of them invalid
     (a random triplet of different objects' points has no consistent solution)."""
@@ -66,6 +69,7 @@ def test_random_triplets_of_shared_points_agree(monkeypatch):
     assert 0.1 < fast[2].mean() < 0.9
 
 
+@needs_numba
 def test_degenerate_triplets_agree(monkeypatch):
     x, d, p, tri = _degenerate_points(np.random.default_rng(13))
     fast, slow = _both_ways(monkeypatch, lambda: solver.solve_triplets(x, d, p, tri))
@@ -74,6 +78,7 @@ def test_degenerate_triplets_agree(monkeypatch):
                                             False, False, False, True, True, True])
 
 
+@needs_numba
 def test_strided_inputs_agree(monkeypatch):
     """Views (columns of a larger array, reversed triplets) give what their copies give."""
     rng = np.random.default_rng(14)
@@ -93,6 +98,7 @@ def _objects(rng, sizes):
     return out
 
 
+@needs_numba
 def test_object_votes_agree(monkeypatch):
     """The estimator's vote stage: the same draws (the generator ends in the same state), the
     same votes in the same order, the same owners; an object of two points draws nothing."""
@@ -111,6 +117,7 @@ def test_object_votes_agree(monkeypatch):
     assert set(o1.tolist()) == {0, 2, 3, 4} and ((f1 >= 300) & (f1 <= 1500)).all()
 
 
+@needs_numba
 @pytest.mark.parametrize("n", [1, 2, 5, 300, 5000, 40_000])
 def test_stabbing_agrees(monkeypatch, n):
     """The compiled deepest start (a merge of the sorted ends) against numpy's searches, both
@@ -132,6 +139,7 @@ def test_stabbing_agrees(monkeypatch, n):
             np.testing.assert_array_equal(a.inliers, b.inliers)
 
 
+@needs_numba
 def test_warm_up_compiles_what_solve_triplets_runs(monkeypatch):
     """solve_triplets, whatever views and integer types it gets, runs the kernel signature that
     the warm-up (the estimator's votes) compiled: no compilation waits in a later call."""
@@ -144,3 +152,57 @@ def test_warm_up_compiles_what_solve_triplets_runs(monkeypatch):
     solver.solve_triplets(big[:, :2], big[:, 2], big[:, 3:],
                           solver.sample_triplets(150, 10, rng).astype(np.int32)[::2])
     assert solver._triplets_kernel.signatures == before and len(before) == 1
+
+
+def test_combine_sums_as_numpy():
+    """combine's Python sums give numpy's bits (its pairwise order), so random_effects gives
+    what it gave on numpy arrays."""
+    rng = np.random.default_rng(19)
+    for n in [*range(0, 40), 127, 128, 129, 300, 1001]:
+        a = rng.normal(size=n) * 10.0 ** rng.integers(-6, 6, n)
+        assert combine._sum(a.tolist()) == float(np.sum(a))
+
+
+def _numpy_random_effects(y, v, tau0, nu0, reject=3.0):
+    """random_effects as it was written on numpy arrays: the reference."""
+    def comb(y, v):
+        k, w = y.size, 1.0 / v
+        mean_fe = float(np.sum(w * y) / w.sum())
+        tau2_dl = 0.0
+        if k > 1:
+            q = float(np.sum(w * (y - mean_fe) ** 2))
+            c = w.sum() - np.sum(w * w) / w.sum()
+            tau2_dl = max(0.0, (q - (k - 1)) / c) if c > 0 else 0.0
+        tau2 = (nu0 * tau0 ** 2 + (k - 1) * tau2_dl) / (nu0 + k - 1)
+        ws = 1.0 / (v + tau2)
+        return float(np.sum(ws * y) / ws.sum()), float(1.0 / ws.sum()), float(tau2)
+
+    used = np.isfinite(y) & np.isfinite(v) & (v > 0)
+    while used.sum() >= 3:
+        idx = np.flatnonzero(used)
+        z = np.zeros(idx.size)
+        for n, i in enumerate(idx):
+            mean, var, tau2 = comb(y[idx[idx != i]], v[idx[idx != i]])
+            z[n] = abs(y[i] - mean) / np.sqrt(v[i] + tau2 + var)
+        if z.max() <= reject:
+            break
+        used[idx[int(np.argmax(z))]] = False
+    return (*comb(y[used], v[used]), used) if used.any() else None
+
+
+def test_random_effects_as_on_numpy_arrays():
+    rng = np.random.default_rng(20)
+    for t in range(3000):
+        n = int(rng.integers(0, 12))
+        y = 6.4 + rng.normal(0, 10.0 ** rng.uniform(-4, -0.5), n)
+        if t % 3 == 0 and n:
+            y[rng.integers(n)] += rng.normal(0, 0.3)  # an outlier to drop
+        v = 10.0 ** rng.uniform(-7, -2, n)
+        if t % 5 == 0 and n:
+            v[rng.integers(n)] = (np.nan, 0.0, np.inf)[t % 3]
+        tau0, nu0 = ((0.005, 2.0), (0.0, 2.0), (0.02, 0.5))[t % 3]
+        got, want = combine.random_effects(y, v, tau0, nu0), _numpy_random_effects(y, v, tau0, nu0)
+        assert (got is None) == (want is None)
+        if got is not None:
+            assert (got.mean, got.var, got.tau2) == want[:3]
+            np.testing.assert_array_equal(got.used, want[3])
