@@ -77,6 +77,16 @@ def _votes(instances: list[Instance], opt: EstimatorOptions, rng: np.random.Gene
                         opt.focal_range)
 
 
+def _nocs_spread(p: np.ndarray):
+    """RMS distance of NOCS points p (N,3) from their mean: sqrt(mean(sum((p - mean)^2, axis=1)))
+    written per column, the same bits at half the cost (numpy reduces an axis of 3 slowly)."""
+    m = p.mean(0)
+    s = (p[:, 0] - m[0]) ** 2
+    s += (p[:, 1] - m[1]) ** 2
+    s += (p[:, 2] - m[2]) ** 2
+    return np.sqrt(s.mean())
+
+
 def estimate_poses(
     instances, focal: float, *, exclude=(), rng: np.random.Generator | None = None
 ) -> list[ObjectPose]:
@@ -279,9 +289,7 @@ def estimate_focal(
         iterations=opt.fit_iterations,
         rng=np.random.default_rng(seed),
     )
-    spread = np.array(
-        [np.sqrt(np.mean(np.sum((i.p - i.p.mean(0)) ** 2, axis=1))) for i in support]
-    )
+    spread = np.array([_nocs_spread(i.p) for i in support])
     good = (
         fits.ok
         & (fits.quality >= opt.min_fit_quality)
