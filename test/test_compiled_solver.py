@@ -5,7 +5,7 @@ deepest start. And combine's Python-float sums, which must give numpy's bits."""
 import numpy as np
 import pytest
 
-from fcop_ros.core import combine, compiled, solver, stabbing
+from fcop_ros.core import combine, compiled, estimator, solver, stabbing
 from fcop_ros.synthetic import simulate_points, simulate_triplet_batch
 
 needs_numba = pytest.mark.skipif(compiled.numba is None, reason="numba is not installed")
@@ -206,3 +206,16 @@ def test_random_effects_as_on_numpy_arrays():
         if got is not None:
             assert (got.mean, got.var, got.tau2) == want[:3]
             np.testing.assert_array_equal(got.used, want[3])
+
+
+@needs_numba
+def test_nocs_spread_agrees(monkeypatch):
+    """The estimator's NOCS spread, compiled and per column, gives the bits of the formula it
+    replaces (numpy's pairwise mean emulated to the last bit) at sizes around its blocks."""
+    rng = np.random.default_rng(21)
+    sizes = [1, 2, 7, 8, 9, 127, 128, 129, 136, 255, 257, 1000, 2000, 9000, 20_001]
+    for n in sizes:
+        p = rng.random((n, 3)) * rng.random(3) + rng.normal(size=3)
+        want = np.sqrt(np.mean(np.sum((p - p.mean(0)) ** 2, axis=1)))
+        fast, slow = _both_ways(monkeypatch, lambda: estimator._nocs_spread(p))
+        assert fast == want and slow == want
