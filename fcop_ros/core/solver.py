@@ -53,10 +53,10 @@ def solve_triplets(x: np.ndarray, d: np.ndarray, p: np.ndarray, triplets: np.nda
     focal, scale_sq, valid = np.empty(t), np.empty(t), np.empty(t, dtype=bool)
     if compiled.ENABLED:
         # Contiguous inputs: one compiled signature, whatever views the caller passes.
+        none = np.empty(0, dtype=np.intp)
         _triplets_kernel(np.ascontiguousarray(x), np.ascontiguousarray(d),
-                         np.ascontiguousarray(p), np.ascontiguousarray(tri),
-                         np.array([x.shape[0]], dtype=np.intp), t, False, -np.inf, np.inf,
-                         focal, scale_sq, valid, np.empty(0, dtype=np.intp))
+                         np.ascontiguousarray(p), np.ascontiguousarray(tri), none, none, False,
+                         -np.inf, np.inf, focal, scale_sq, valid, none)
         return focal, scale_sq, valid
     # Every pair term is written out per component on 1-D columns (reductions over a length-2/3
     # last axis are slow in numpy), a chunk of triplets at a time so that the temporaries stay
@@ -133,54 +133,61 @@ def _solve_chunk(cols, idx, focal, scale_sq, valid):
     valid[...] = ok
 
 
-@compiled.kernel
-def _triplets_kernel(x, d, p, tri, sizes, count, shift, lo, hi, focal, scale_sq, valid, owner):
-    """The compiled triplet solve: one pass, ``_solve_chunk``'s arithmetic operation for
-    operation in the same order (no fused multiply-adds), so its numbers have the same bits.
+_BLOCK = 64  # triplets the kernel gathers, then solves in one vectorised loop
 
-    tri holds ``count`` rows (i, j, k) for each of the objects whose points lie one after another
-    in x, d, p, sizes[o] points each. ``solve_triplets`` passes its triplets as one object and
-    gets every result at its row (owner empty). ``object_votes`` passes raw draws
-    (``shift``: made distinct as ``sample_triplets`` does, no rows for objects of fewer than
-    three points) and gets only the valid focal lengths in [lo, hi], packed to the front with
-    their object in owner. Returns the number of results written.
+
+@compiled.kernel
+def _triplets_kernel(x, d, p, tri, base, group, shift, lo, hi, focal, scale_sq, valid, owner):
+    """The compiled triplet solve: ``_solve_chunk``'s arithmetic operation for operation in the
+    same order (no fused multiply-adds), so its numbers have the same bits.
+
+    A block of triplets is gathered first, then solved in a loop of plain arithmetic without
+    branches (``v - v == 0`` is isfinite), which the compiler turns into vector instructions.
+    ``solve_triplets`` passes absolute triplets (base and group empty) and gets every result
+    at its row (owner empty). ``object_votes`` passes raw draws with each row's object (group)
+    and its first point (base), ``shift`` to make them distinct as ``sample_triplets`` does,
+    and gets only the valid focal lengths in [lo, hi], packed to the front with their object
+    in owner. Returns the number of results written.
     """
+    g = np.empty((18, _BLOCK))  # per row: NOCS, d x and d of the triplet's three points
+    bf, bs = np.empty(_BLOCK), np.empty(_BLOCK)
+    bok = np.empty(_BLOCK, dtype=np.bool_)
     m = 0
-    start = 0
-    t = 0
-    for o in range(sizes.size):
-        n = sizes[o]
-        if shift and n < 3:
-            start += n
-            continue
-        for _ in range(count):
+    for s0 in range(0, tri.shape[0], _BLOCK):
+        nb = min(_BLOCK, tri.shape[0] - s0)
+        for q in range(nb):
+            t = s0 + q
             i, j, k = tri[t, 0], tri[t, 1], tri[t, 2]
-            t += 1
             if shift:  # sample_triplets' shifts, one triplet at a time
                 j += 1 if j >= i else 0
                 k += 1 if k >= min(i, j) else 0
                 k += 1 if k >= max(i, j) else 0
-            i, j, k = start + i, start + j, start + k
-            # Camera-plane points d x; rows of the pairs (i,j), (j,k), (i,k).
-            ax, ay = x[i, 0] * d[i], x[i, 1] * d[i]
-            bx, by = x[j, 0] * d[j], x[j, 1] * d[j]
-            cx, cy = x[k, 0] * d[k], x[k, 1] * d[k]
-            u, v, w = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1], p[i, 2] - p[j, 2]
+            if base.size:
+                i, j, k = i + base[t], j + base[t], k + base[t]
+            for c, r in enumerate((i, j, k)):
+                g[6 * c, q], g[6 * c + 1, q], g[6 * c + 2, q] = p[r, 0], p[r, 1], p[r, 2]
+                g[6 * c + 3, q], g[6 * c + 4, q] = x[r, 0] * d[r], x[r, 1] * d[r]
+                g[6 * c + 5, q] = d[r]
+        for q in range(nb):
+            # Rows of the pairs (i,j), (j,k), (i,k): NOCS, image (camera plane) and depth.
+            u, v, w = g[0, q] - g[6, q], g[1, q] - g[7, q], g[2, q] - g[8, q]
             n0 = u * u + v * v + w * w
-            u, v, w = p[j, 0] - p[k, 0], p[j, 1] - p[k, 1], p[j, 2] - p[k, 2]
+            u, v, w = g[6, q] - g[12, q], g[7, q] - g[13, q], g[8, q] - g[14, q]
             n1 = u * u + v * v + w * w
-            u, v, w = p[i, 0] - p[k, 0], p[i, 1] - p[k, 1], p[i, 2] - p[k, 2]
+            u, v, w = g[0, q] - g[12, q], g[1, q] - g[13, q], g[2, q] - g[14, q]
             n2 = u * u + v * v + w * w
-            m0 = (ax - bx) * (ax - bx) + (ay - by) * (ay - by)
-            m1 = (bx - cx) * (bx - cx) + (by - cy) * (by - cy)
-            m2 = (ax - cx) * (ax - cx) + (ay - cy) * (ay - cy)
-            c0 = (d[i] - d[j]) * (d[i] - d[j])
-            c1 = (d[j] - d[k]) * (d[j] - d[k])
-            c2 = (d[i] - d[k]) * (d[i] - d[k])
+            u, v = g[3, q] - g[9, q], g[4, q] - g[10, q]
+            m0 = u * u + v * v
+            u, v = g[9, q] - g[15, q], g[10, q] - g[16, q]
+            m1 = u * u + v * v
+            u, v = g[3, q] - g[15, q], g[4, q] - g[16, q]
+            m2 = u * u + v * v
+            u, v, w = g[5, q] - g[11, q], g[11, q] - g[17, q], g[5, q] - g[17, q]
+            c0, c1, c2 = u * u, v * v, w * w
             na = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-            nb = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+            nb_ = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
             a0, a1, a2 = n0 / na, n1 / na, n2 / na
-            b0, b1, b2 = m0 / nb, m1 / nb, m2 / nb
+            b0, b1, b2 = m0 / nb_, m1 / nb_, m2 / nb_
             saa = a0 * a0 + a1 * a1 + a2 * a2
             sbb = b0 * b0 + b1 * b1 + b2 * b2
             sab = a0 * b0 + a1 * b1 + a2 * b2
@@ -188,23 +195,21 @@ def _triplets_kernel(x, d, p, tri, sizes, count, shift, lo, hi, focal, scale_sq,
             sbc = b0 * c0 + b1 * c1 + b2 * c2
             det = saa * sbb - sab * sab
             s2 = (sbb * sac - sab * sbc) / det / na
-            w = (sab * sac - saa * sbc) / det / nb
+            w = (sab * sac - saa * sbc) / det / nb_
             f = 1.0 / np.sqrt(w)
-            # Without branches (& not and): one speed however many triplets are invalid.
-            ok = ((det > _DEGENERATE_REL_DET * saa * sbb) & np.isfinite(s2) & np.isfinite(w)
-                  & (s2 > 0) & (w > 0) & np.isfinite(f))
+            ok = ((det > _DEGENERATE_REL_DET * saa * sbb) & (s2 - s2 == 0) & (w - w == 0)
+                  & (s2 > 0) & (w > 0) & (f - f == 0))
+            bf[q] = f if ok else 0.0
+            bs[q] = s2 if ok else 0.0
+            bok[q] = ok
+        for q in range(nb):
             if owner.size == 0:
-                focal[m] = f if ok else 0.0
-                scale_sq[m] = s2 if ok else 0.0
-                valid[m] = ok
+                focal[m], scale_sq[m], valid[m] = bf[q], bs[q], bok[q]
                 m += 1
-            elif ok and f >= lo and f <= hi:
-                focal[m] = f
-                scale_sq[m] = s2
-                valid[m] = True
-                owner[m] = o
+            elif bok[q] and bf[q] >= lo and bf[q] <= hi:
+                focal[m], scale_sq[m], valid[m] = bf[q], bs[q], True
+                owner[m] = group[s0 + q]
                 m += 1
-        start += n
     return m
 
 
@@ -243,15 +248,17 @@ def object_votes(xs, ds, ps, count: int, rng: np.random.Generator, focal_range):
     sizes = [len(v) for v in ds]
     x, d, p = (np.ascontiguousarray(np.concatenate(v), dtype=np.float64) for v in (xs, ds, ps))
     if compiled.ENABLED:
-        big = [n for n in sizes if n >= 3]
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+        big = [o for o, n in enumerate(sizes) if n >= 3]
         raw = np.empty((len(big) * count, 3), dtype=np.intp)
-        for b, n in enumerate(big):
-            for c, draw in enumerate(_draw(n, count, rng)):
+        for b, o in enumerate(big):
+            for c, draw in enumerate(_draw(sizes[o], count, rng)):
                 raw[b * count:(b + 1) * count, c] = draw
+        group = np.repeat(np.array(big, dtype=np.intp), count)
         focal, scale_sq = np.empty(raw.shape[0]), np.empty(raw.shape[0])
         valid, owner = np.empty(raw.shape[0], dtype=bool), np.empty(raw.shape[0], dtype=np.intp)
-        m = _triplets_kernel(x, d, p, raw, np.array(sizes, dtype=np.intp), count, True, lo, hi,
-                             focal, scale_sq, valid, owner)
+        m = _triplets_kernel(x, d, p, raw, starts[group], group, True, lo, hi, focal, scale_sq,
+                             valid, owner)
         return focal[:m].copy(), owner[:m].copy()
     offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
     tri = np.concatenate([sample_triplets(n, count, rng) + off for n, off in zip(sizes, offsets)])
