@@ -154,8 +154,8 @@ def _triplets_kernel(x, d, p, tri, base, group, shift, lo, hi, focal, scale_sq, 
     bok = np.empty(_BLOCK, dtype=np.bool_)
     m = 0
     for s0 in range(0, tri.shape[0], _BLOCK):
-        nb = min(_BLOCK, tri.shape[0] - s0)
-        for q in range(nb):
+        size = min(_BLOCK, tri.shape[0] - s0)
+        for q in range(size):
             t = s0 + q
             i, j, k = tri[t, 0], tri[t, 1], tri[t, 2]
             if shift:  # sample_triplets' shifts, one triplet at a time
@@ -168,7 +168,7 @@ def _triplets_kernel(x, d, p, tri, base, group, shift, lo, hi, focal, scale_sq, 
                 g[6 * c, q], g[6 * c + 1, q], g[6 * c + 2, q] = p[r, 0], p[r, 1], p[r, 2]
                 g[6 * c + 3, q], g[6 * c + 4, q] = x[r, 0] * d[r], x[r, 1] * d[r]
                 g[6 * c + 5, q] = d[r]
-        for q in range(nb):
+        for q in range(size):
             # Rows of the pairs (i,j), (j,k), (i,k): NOCS, image (camera plane) and depth.
             u, v, w = g[0, q] - g[6, q], g[1, q] - g[7, q], g[2, q] - g[8, q]
             n0 = u * u + v * v + w * w
@@ -185,9 +185,9 @@ def _triplets_kernel(x, d, p, tri, base, group, shift, lo, hi, focal, scale_sq, 
             u, v, w = g[5, q] - g[11, q], g[11, q] - g[17, q], g[5, q] - g[17, q]
             c0, c1, c2 = u * u, v * v, w * w
             na = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-            nb_ = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+            nb = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
             a0, a1, a2 = n0 / na, n1 / na, n2 / na
-            b0, b1, b2 = m0 / nb_, m1 / nb_, m2 / nb_
+            b0, b1, b2 = m0 / nb, m1 / nb, m2 / nb
             saa = a0 * a0 + a1 * a1 + a2 * a2
             sbb = b0 * b0 + b1 * b1 + b2 * b2
             sab = a0 * b0 + a1 * b1 + a2 * b2
@@ -195,14 +195,14 @@ def _triplets_kernel(x, d, p, tri, base, group, shift, lo, hi, focal, scale_sq, 
             sbc = b0 * c0 + b1 * c1 + b2 * c2
             det = saa * sbb - sab * sab
             s2 = (sbb * sac - sab * sbc) / det / na
-            w = (sab * sac - saa * sbc) / det / nb_
+            w = (sab * sac - saa * sbc) / det / nb
             f = 1.0 / np.sqrt(w)
             ok = ((det > _DEGENERATE_REL_DET * saa * sbb) & (s2 - s2 == 0) & (w - w == 0)
                   & (s2 > 0) & (w > 0) & (f - f == 0))
             bf[q] = f if ok else 0.0
             bs[q] = s2 if ok else 0.0
             bok[q] = ok
-        for q in range(nb):
+        for q in range(size):
             if owner.size == 0:
                 focal[m], scale_sq[m], valid[m] = bf[q], bs[q], bok[q]
                 m += 1
