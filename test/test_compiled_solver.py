@@ -215,7 +215,8 @@ def test_nocs_spread_agrees(monkeypatch):
     rng = np.random.default_rng(21)
     sizes = [1, 2, 7, 8, 9, 127, 128, 129, 136, 255, 257, 1000, 2000, 9000, 20_001]
     for n in sizes:
-        p = rng.random((n, 3)) * rng.random(3) + rng.normal(size=3)
-        want = np.sqrt(np.mean(np.sum((p - p.mean(0)) ** 2, axis=1)))
-        fast, slow = _both_ways(monkeypatch, lambda: estimator._nocs_spread(p))
-        assert fast == want and slow == want
+        for _ in range(5):  # points of very different distances, so that order shows
+            p = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-3, 3, (n, 1)) + rng.normal(size=3)
+            want = np.sqrt(np.mean(np.sum((p - p.mean(0)) ** 2, axis=1)))
+            fast, slow = _both_ways(monkeypatch, lambda: estimator._nocs_spread(p))
+            assert fast == want and slow == want
