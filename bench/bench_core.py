@@ -8,7 +8,8 @@ the absolute times. Figures:
 
 - solve_triplets in M triplets/s (target >= 10 M/s) on 1e6 simulated triplets of distinct
   points and on 1e6 random triplets of 10,000 points (the estimator's pattern), next to a
-  plain numpy pass that only gathers the pairs and forms their squared norms;
+  plain numpy pass that only gathers the pairs and forms their squared norms, and the numpy
+  path (the fallback without numba) of the same call;
 - interval stabbing of 1e6 votes (target <= 50 ms and <= 1.5x one np.sort of 2e6 floats):
   stab_equal_width (the estimator's relative mode) and interval_stabbing (any widths);
 - estimate_focal on 640x480 frames with 5 objects, without poses (target 5 ms on one quiet
@@ -32,11 +33,11 @@ from world_accuracy import plain_reference  # bench/ is on the path of this scri
 
 from fcop_ros import (FocalWindow, WindowOptions, estimate_focal, estimate_poses,
                       interval_stabbing, solve_triplets)
-from fcop_ros.core import EstimatorOptions
+from fcop_ros.core import EstimatorOptions, compiled
 from fcop_ros.core.camera import image_centre
 from fcop_ros.core.correspondences import extract_instances
 from fcop_ros.core.object_fit import fit_objects
-from fcop_ros.core.solver import sample_triplets
+from fcop_ros.core.solver import object_votes, sample_triplets
 from fcop_ros.core.stabbing import focal_intervals, stab_equal_width
 from fcop_ros.synthetic import apply_noise, render_scene, simulate_triplet_batch
 
@@ -87,6 +88,14 @@ def triplets(rng):
         print(f"solve_triplets, {name}: {rate:.1f} M/s ({1e9 * t / n:.0f} ns each; "
               f"target >= 10 M/s: {verdict(rate >= 10)}); plain pair gather+norm alone: "
               f"{n / t_ref / 1e6:.1f} M/s")
+        if compiled.ENABLED:  # the numpy fallback, the same call with the kernels off
+            compiled.ENABLED = False
+            try:
+                t_np = best_of(solve_triplets, X, D, P, tri, repeat=3)
+            finally:
+                compiled.ENABLED = True
+            print(f"  numpy path (FCOP_NUMBA=0): {n / t_np / 1e6:.1f} M/s; compiled "
+                  f"{t_np / t:.1f}x faster")
 
 
 def stabbing(rng):
@@ -135,6 +144,9 @@ def stages(frames, repeats):
     parts = {
         "correspondences": frame_times(lambda fr, k: extract(fr), frames, repeats),
         "triplet votes": frame_times(lambda fr, k: solve_triplets(*data[k]), frames, repeats),
+        "vote stage (draws + solve)": frame_times(lambda fr, k: object_votes(
+            [i.x for i in inst[k]], [i.d for i in inst[k]], [i.p for i in inst[k]],
+            opt.triplets_per_object, np.random.default_rng(k), opt.focal_range), frames, repeats),
         "stabbing": frame_times(lambda fr, k: stab_equal_width(np.log(votes[k]), np.log1p(0.05)),
                                 frames, repeats),
         "per-object fit": frame_times(lambda fr, k: fit_objects(

@@ -16,13 +16,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import compiled
 from .combine import random_effects
 from .camera import image_centre
 from .correspondences import Instance, calibrated_nocs, check_images, extract_instances
 from .error_model import object_variances
 from .object_fit import fit_objects
 from .pose import ObjectPose, umeyama
-from .solver import sample_triplets, solve_triplets
+from .solver import object_votes, solve_triplets
 from .options import EstimatorOptions
 from .stabbing import interval_stabbing, stab_equal_width
 
@@ -73,20 +74,79 @@ class FocalEstimate:
 
 def _votes(instances: list[Instance], opt: EstimatorOptions, rng: np.random.Generator):
     """Minimal-solver votes of every object, solved in one call: (focal (V,), owner index (V,))."""
-    lo, hi = opt.focal_range
-    sizes = np.array([len(inst.d) for inst in instances])
-    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    n_tri = int(opt.triplets_per_object)
-    tri = np.concatenate(
-        [sample_triplets(int(n), n_tri, rng) + off for n, off in zip(sizes, offsets)]
-    )
-    owner = np.repeat(np.arange(len(instances)), [n_tri if n >= 3 else 0 for n in sizes])
-    x = np.concatenate([inst.x for inst in instances])
-    d = np.concatenate([inst.d for inst in instances])
-    p = np.concatenate([inst.p for inst in instances])
-    f, _, ok = solve_triplets(x, d, p, tri)
-    ok &= (f >= lo) & (f <= hi)
-    return f[ok], owner[ok]
+    return object_votes([inst.x for inst in instances], [inst.d for inst in instances],
+                        [inst.p for inst in instances], int(opt.triplets_per_object), rng,
+                        opt.focal_range)
+
+
+def _nocs_spread(p: np.ndarray):
+    """RMS distance of NOCS points p (N,3) from their mean: sqrt(mean(sum((p - mean)^2, axis=1))),
+    written per column (the same bits; numpy reduces an axis of 3 slowly) or compiled."""
+    if compiled.ENABLED and p.dtype == np.float64:
+        return _nocs_spread_kernel(np.ascontiguousarray(p))
+    m = p.mean(0)
+    s = (p[:, 0] - m[0]) ** 2
+    s += (p[:, 1] - m[1]) ** 2
+    s += (p[:, 2] - m[2]) ** 2
+    return np.sqrt(s.mean())
+
+
+@compiled.kernel
+def _nocs_spread_kernel(p):
+    """``_nocs_spread`` in one pass with numpy's bits: the column means summed in order, as
+    numpy reduces axis 0, and the mean of the squared distances in numpy's pairwise order
+    (sequential below 8, eight accumulators up to 128, halves above; the halving recursion
+    runs on an explicit stack)."""
+    n = p.shape[0]
+    m0 = m1 = m2 = 0.0
+    for r in range(n):
+        m0 += p[r, 0]
+        m1 += p[r, 1]
+        m2 += p[r, 2]
+    m0, m1, m2 = m0 / n, m1 / n, m2 / n
+    s = np.empty(n)
+    for r in range(n):
+        u, v, w = p[r, 0] - m0, p[r, 1] - m1, p[r, 2] - m2
+        s[r] = u * u + v * v + w * w
+    # Stack entries (offset, length, combine?): a block is summed, split, or, once both its
+    # halves are on the value stack, their sum replaces them (left + right, as numpy adds).
+    offs, lens, combine = np.empty(64, np.intp), np.empty(64, np.intp), np.empty(64, np.bool_)
+    vals = np.empty(64)
+    offs[0], lens[0], combine[0] = 0, n, False
+    top, vtop = 1, 0
+    while top > 0:
+        top -= 1
+        off, ln = offs[top], lens[top]
+        if combine[top]:
+            vals[vtop - 2] = vals[vtop - 2] + vals[vtop - 1]
+            vtop -= 1
+        elif ln < 8:
+            res = 0.0
+            for i in range(off, off + ln):
+                res += s[i]
+            vals[vtop] = res
+            vtop += 1
+        elif ln <= 128:
+            r = s[off:off + 8].copy()
+            i = 8
+            while i < ln - ln % 8:
+                for j in range(8):
+                    r[j] += s[off + i + j]
+                i += 8
+            res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+            while i < ln:
+                res += s[off + i]
+                i += 1
+            vals[vtop] = res
+            vtop += 1
+        else:
+            half = ln // 2
+            half -= half % 8
+            offs[top], lens[top], combine[top] = off, ln, True
+            offs[top + 1], lens[top + 1], combine[top + 1] = off + half, ln - half, False
+            offs[top + 2], lens[top + 2], combine[top + 2] = off, half, False  # summed first
+            top += 3
+    return np.sqrt(vals[0] / n)
 
 
 def estimate_poses(
@@ -291,9 +351,7 @@ def estimate_focal(
         iterations=opt.fit_iterations,
         rng=np.random.default_rng(seed),
     )
-    spread = np.array(
-        [np.sqrt(np.mean(np.sum((i.p - i.p.mean(0)) ** 2, axis=1))) for i in support]
-    )
+    spread = np.array([_nocs_spread(i.p) for i in support])
     good = (
         fits.ok
         & (fits.quality >= opt.min_fit_quality)

@@ -7,11 +7,15 @@ with K = diag(f, f, 1) gives, after differencing (removes t) and taking norms (r
     s^2 ||p_a - p_b||^2 - ||d_a x_a - d_b x_b||^2 / f^2 = (d_a - d_b)^2
 
 A triplet (i, j, k) gives three such rows for the pairs (i,j), (j,k), (i,k), linear in the
-unknowns (s^2, 1/f^2). Everything here is vectorised over triplets (a chunk at a time).
+unknowns (s^2, 1/f^2). The numpy path is vectorised over triplets (a chunk at a time); the
+compiled kernel (:mod:`.compiled`) makes one pass over them with the same arithmetic in the
+same order, so both give the same bits.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from . import compiled
 
 # A triplet whose 2x2 normal matrix is closer to singular than this (its determinant relative
 # to the product of its diagonal, which is unit-free) does not determine (s^2, 1/f^2) and is
@@ -47,6 +51,13 @@ def solve_triplets(x: np.ndarray, d: np.ndarray, p: np.ndarray, triplets: np.nda
 
     t = tri.shape[0]
     focal, scale_sq, valid = np.empty(t), np.empty(t), np.empty(t, dtype=bool)
+    if compiled.ENABLED:
+        # Contiguous inputs: one compiled signature, whatever views the caller passes.
+        none = np.empty(0, dtype=np.intp)
+        _triplets_kernel(np.ascontiguousarray(x), np.ascontiguousarray(d),
+                         np.ascontiguousarray(p), np.ascontiguousarray(tri), none, none, False,
+                         -np.inf, np.inf, focal, scale_sq, valid, none)
+        return focal, scale_sq, valid
     # Every pair term is written out per component on 1-D columns (reductions over a length-2/3
     # last axis are slow in numpy), a chunk of triplets at a time so that the temporaries stay
     # in cache; the columns are gathered straight from the (strided) input, which is not copied.
@@ -122,15 +133,136 @@ def _solve_chunk(cols, idx, focal, scale_sq, valid):
     valid[...] = ok
 
 
+_BLOCK = 64  # triplets the kernel gathers, then solves in one vectorised loop
+
+
+@compiled.kernel
+def _triplets_kernel(x, d, p, tri, base, group, shift, lo, hi, focal, scale_sq, valid, owner):
+    """The compiled triplet solve: ``_solve_chunk``'s arithmetic operation for operation in the
+    same order (no fused multiply-adds), so its numbers have the same bits.
+
+    A block of triplets is gathered first, then solved in a loop of plain arithmetic without
+    branches (``v - v == 0`` is isfinite), which the compiler turns into vector instructions.
+    ``solve_triplets`` passes absolute triplets (base and group empty) and gets every result
+    at its row (owner empty). ``object_votes`` passes raw draws with each row's object (group)
+    and its first point (base), ``shift`` to make them distinct as ``sample_triplets`` does,
+    and gets only the valid focal lengths in [lo, hi], packed to the front with their object
+    in owner. Returns the number of results written.
+    """
+    g = np.empty((18, _BLOCK))  # per row: NOCS, d x and d of the triplet's three points
+    bf, bs = np.empty(_BLOCK), np.empty(_BLOCK)
+    bok = np.empty(_BLOCK, dtype=np.bool_)
+    m = 0
+    for s0 in range(0, tri.shape[0], _BLOCK):
+        size = min(_BLOCK, tri.shape[0] - s0)
+        for q in range(size):
+            t = s0 + q
+            i, j, k = tri[t, 0], tri[t, 1], tri[t, 2]
+            if shift:  # sample_triplets' shifts, one triplet at a time
+                j += 1 if j >= i else 0
+                k += 1 if k >= min(i, j) else 0
+                k += 1 if k >= max(i, j) else 0
+            if base.size:
+                i, j, k = i + base[t], j + base[t], k + base[t]
+            for c, r in enumerate((i, j, k)):
+                g[6 * c, q], g[6 * c + 1, q], g[6 * c + 2, q] = p[r, 0], p[r, 1], p[r, 2]
+                g[6 * c + 3, q], g[6 * c + 4, q] = x[r, 0] * d[r], x[r, 1] * d[r]
+                g[6 * c + 5, q] = d[r]
+        for q in range(size):
+            # Rows of the pairs (i,j), (j,k), (i,k): NOCS, image (camera plane) and depth.
+            u, v, w = g[0, q] - g[6, q], g[1, q] - g[7, q], g[2, q] - g[8, q]
+            n0 = u * u + v * v + w * w
+            u, v, w = g[6, q] - g[12, q], g[7, q] - g[13, q], g[8, q] - g[14, q]
+            n1 = u * u + v * v + w * w
+            u, v, w = g[0, q] - g[12, q], g[1, q] - g[13, q], g[2, q] - g[14, q]
+            n2 = u * u + v * v + w * w
+            u, v = g[3, q] - g[9, q], g[4, q] - g[10, q]
+            m0 = u * u + v * v
+            u, v = g[9, q] - g[15, q], g[10, q] - g[16, q]
+            m1 = u * u + v * v
+            u, v = g[3, q] - g[15, q], g[4, q] - g[16, q]
+            m2 = u * u + v * v
+            u, v, w = g[5, q] - g[11, q], g[11, q] - g[17, q], g[5, q] - g[17, q]
+            c0, c1, c2 = u * u, v * v, w * w
+            na = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            nb = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+            a0, a1, a2 = n0 / na, n1 / na, n2 / na
+            b0, b1, b2 = m0 / nb, m1 / nb, m2 / nb
+            saa = a0 * a0 + a1 * a1 + a2 * a2
+            sbb = b0 * b0 + b1 * b1 + b2 * b2
+            sab = a0 * b0 + a1 * b1 + a2 * b2
+            sac = a0 * c0 + a1 * c1 + a2 * c2
+            sbc = b0 * c0 + b1 * c1 + b2 * c2
+            det = saa * sbb - sab * sab
+            s2 = (sbb * sac - sab * sbc) / det / na
+            w = (sab * sac - saa * sbc) / det / nb
+            f = 1.0 / np.sqrt(w)
+            ok = ((det > _DEGENERATE_REL_DET * saa * sbb) & (s2 - s2 == 0) & (w - w == 0)
+                  & (s2 > 0) & (w > 0) & (f - f == 0))
+            bf[q] = f if ok else 0.0
+            bs[q] = s2 if ok else 0.0
+            bok[q] = ok
+        for q in range(size):
+            if owner.size == 0:
+                focal[m], scale_sq[m], valid[m] = bf[q], bs[q], bok[q]
+                m += 1
+            elif bok[q] and bf[q] >= lo and bf[q] <= hi:
+                focal[m], scale_sq[m], valid[m] = bf[q], bs[q], True
+                owner[m] = group[s0 + q]
+                m += 1
+    return m
+
+
 def sample_triplets(n: int, count: int, rng: np.random.Generator) -> np.ndarray:
     """Draw ``count`` triplets of distinct indices in [0, n) uniformly (the paper's sampling)."""
     if n < 3 or count <= 0:
         return np.empty((0, 3), dtype=np.intp)
-    i = rng.integers(0, n, count)
-    j = rng.integers(0, n - 1, count)
+    i, j, k = _draw(n, count, rng)
     j += j >= i
-    k = rng.integers(0, n - 2, count)
     lo, hi = np.minimum(i, j), np.maximum(i, j)
     k += k >= lo
     k += k >= hi
     return np.stack([i, j, k], axis=1)
+
+
+def _draw(n: int, count: int, rng: np.random.Generator):
+    """The random numbers of ``sample_triplets`` (n >= 3): i in [0, n), j in [0, n-1) and
+    k in [0, n-2), which it then shifts past the smaller indices to make them distinct."""
+    i = rng.integers(0, n, count)
+    j = rng.integers(0, n - 1, count)
+    k = rng.integers(0, n - 2, count)
+    return i, j, k
+
+
+def object_votes(xs, ds, ps, count: int, rng: np.random.Generator, focal_range):
+    """The estimator's votes: ``count`` random triplets on every object (``sample_triplets``,
+    object after object, from ``rng``), solved; the valid focal lengths inside focal_range.
+
+    xs, ds, ps: per object its x (N_o,2), d (N_o,) and p (N_o,3) as for ``solve_triplets``;
+    objects of fewer than three points draw nothing. Returns (focal (V,), owner (V,)), owner
+    the index of the vote's object. The compiled path draws the same numbers and solves each
+    triplet as it shifts it, without the triplet array or the invalid votes.
+    """
+    lo, hi = (float(v) for v in focal_range)
+    count = max(int(count), 0)
+    sizes = [len(v) for v in ds]
+    x, d, p = (np.ascontiguousarray(np.concatenate(v), dtype=np.float64) for v in (xs, ds, ps))
+    if compiled.ENABLED:
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+        big = [o for o, n in enumerate(sizes) if n >= 3]
+        raw = np.empty((len(big) * count, 3), dtype=np.intp)
+        for b, o in enumerate(big):
+            for c, draw in enumerate(_draw(sizes[o], count, rng)):
+                raw[b * count:(b + 1) * count, c] = draw
+        group = np.repeat(np.array(big, dtype=np.intp), count)
+        focal, scale_sq = np.empty(raw.shape[0]), np.empty(raw.shape[0])
+        valid, owner = np.empty(raw.shape[0], dtype=bool), np.empty(raw.shape[0], dtype=np.intp)
+        m = _triplets_kernel(x, d, p, raw, starts[group], group, True, lo, hi, focal, scale_sq,
+                             valid, owner)
+        return focal[:m].copy(), owner[:m].copy()
+    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+    tri = np.concatenate([sample_triplets(n, count, rng) + off for n, off in zip(sizes, offsets)])
+    owner = np.repeat(np.arange(len(sizes)), [count if n >= 3 else 0 for n in sizes])
+    f, _, ok = solve_triplets(x, d, p, tri)
+    ok &= (f >= lo) & (f <= hi)
+    return f[ok], owner[ok]
