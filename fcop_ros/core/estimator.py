@@ -314,10 +314,10 @@ def estimate_focal(
         return FocalEstimate(
             None, votes_per_object=per_obj, reason="no valid triplet (degenerate geometry)", **base
         )
-    lo, hi, back = opt.noise_bound.intervals(votes)
     if opt.noise_bound.equal_widths:  # one width in log f: one sort of the centres
-        st = stab_equal_width(np.log(votes), opt.noise_bound.log_half_width)
+        st, back = stab_equal_width(np.log(votes), opt.noise_bound.log_half_width), np.exp
     else:
+        lo, hi, back = opt.noise_bound.intervals(votes)
         st = interval_stabbing(lo, hi)
     inl = st.inliers
     count = int(inl.sum())
