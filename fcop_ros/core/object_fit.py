@@ -516,6 +516,8 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
     nuv = k0 + 7  # Juv's rows are the parameters 0 .. nuv - 1
     nd = 6 if depth_tilt else 4
     idd = np.array([k0, k0 + 1, k0 + 2, k0 + 6, k0 + 7, k0 + 8])
+    buf_uv = np.empty(9 * 2 * m)
+    buf_d = np.empty(7 * m)
     for it in range(iterations):
         last = it == iterations - 1
         for k in range(o):
@@ -558,17 +560,16 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
             sig_d[k] = sdp
             e2u = 0.5 / _CAUCHY ** 2 / spx ** 2
             e2d = 1.0 / _CAUCHY ** 2 / sdp ** 2
-            for i in range(nk):
-                W[k, i] = 1.0 / (1.0 + (e2u * r[i, 0] ** 2 + e2u * r[i, 1] ** 2
-                                        + e2d * r[i, 2] ** 2))
             if last:
+                for i in range(nk):
+                    W[k, i] = 1.0 / (1.0 + (e2u * r[i, 0] ** 2 + e2u * r[i, 1] ** 2
+                                            + e2d * r[i, 2] ** 2))
                 continue
-            # The normal equations, each row scaled by the square root of its weight
-            # w / sigma^2 (see the numpy loop for the Jacobian's entries).
-            Juv = np.zeros((nuv, 2 * nk))
-            Jd = np.empty((nd, nk))
-            ruv = np.empty(2 * nk)
-            rd = np.empty(nk)
+            # The new weights, and the normal equations with each row scaled by the square root
+            # of its weight w / sigma^2 (see the numpy loop for the Jacobian's entries). The
+            # scaled residuals are the blocks' last rows: one product gives J^T W J and J^T W r.
+            Juv = buf_uv[:(nuv + 1) * 2 * nk].reshape((nuv + 1, 2 * nk))
+            Jd = buf_d[:(nd + 1) * nk].reshape((nd + 1, nk))
             c = k0  # log s
             isp = 1.0 / spx
             isd = 1.0 / sdp
@@ -584,7 +585,9 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
                 uh = (q0 + tx) * fiz
                 vh = (q1 + ty) * fiz
                 gain = 1.0 + (Ut[k, i, 0] * g0 + Ut[k, i, 1] * g1)
-                sw = np.sqrt(W[k, i])
+                w = 1.0 / (1.0 + (e2u * r[i, 0] ** 2 + e2u * r[i, 1] ** 2 + e2d * r[i, 2] ** 2))
+                W[k, i] = w
+                sw = np.sqrt(w)
                 su = sw * isp
                 sd = sw * isd
                 a = fiz * su
@@ -606,6 +609,8 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
                 Juv[c + 3, i] = -aq1
                 Juv[c + 3, v] = aq0
                 Juv[c + 4, i] = a  # t
+                Juv[c + 4, v] = 0.0
+                Juv[c + 5, i] = 0.0
                 Juv[c + 5, v] = a
                 Juv[c + 6, i] = -uz
                 Juv[c + 6, v] = -vz
@@ -617,21 +622,19 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
                     zs = z * sd
                     Jd[4, i] = Ut[k, i, 0] * zs
                     Jd[5, i] = Ut[k, i, 1] * zs
-                ruv[i] = r[i, 0] * su
-                ruv[v] = r[i, 1] * su
-                rd[i] = r[i, 2] * sd
+                Juv[nuv, i] = r[i, 0] * su
+                Juv[nuv, v] = r[i, 1] * su
+                Jd[nd, i] = r[i, 2] * sd
             Muv = np.dot(Juv, Juv.T)
-            guv = np.dot(Juv, ruv)
             Md = np.dot(Jd, Jd.T)
-            gd = np.dot(Jd, rd)
             Hk = H[k]
             gk = g[k]
             Hk[:] = 0.0
             gk[:] = 0.0
-            Hk[:nuv, :nuv] = Muv
-            gk[:nuv] = guv
+            Hk[:nuv, :nuv] = Muv[:nuv, :nuv]
+            gk[:nuv] = Muv[nuv, :nuv]
             for x in range(nd):
-                gk[idd[x]] += gd[x]
+                gk[idd[x]] += Md[nd, x]
                 for y in range(nd):
                     Hk[idd[x], idd[y]] += Md[x, y]
         if last:
