@@ -508,6 +508,7 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
     A = np.empty((npar, npar))
     piv = np.empty(npar, np.int64)
     r = np.empty((m, 3))
+    pix = np.empty((3, m))  # per pixel: 1 / z and the row scales su, sd
     lam = 1e-6
     # The Jacobian's non-zero entries in two dense blocks: the u and v rows (the 2n columns of
     # Juv) in the parameters [log f], log s, w (3), t (3) (u's t_y and v's t_x are zero), the d
@@ -540,7 +541,9 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
                 q1 = a10 * p0 + a11 * p1 + a12 * p2
                 zc = a20 * p0 + a21 * p1 + a22 * p2 + tz
                 z = zc if abs(zc) > 1e-9 else 1e-9
-                fiz = f * (1.0 / z)
+                iz = 1.0 / z
+                pix[0, i] = iz
+                fiz = f * iz
                 gain = 1.0 + (Ut[k, i, 0] * g0 + Ut[k, i, 1] * g1)
                 r0 = X[k, i, 0] - (q0 + tx) * fiz
                 r1 = X[k, i, 1] - (q1 + ty) * fiz
@@ -573,6 +576,14 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
             c = k0  # log s
             isp = 1.0 / spx
             isd = 1.0 / sdp
+            # The new weights and the rows' scales first, in a loop of their own: the divisions
+            # and square roots of many pixels then overlap.
+            for i in range(nk):
+                w = 1.0 / (1.0 + (e2u * r[i, 0] ** 2 + e2u * r[i, 1] ** 2 + e2d * r[i, 2] ** 2))
+                W[k, i] = w
+                sw = np.sqrt(w)
+                pix[1, i] = sw * isp
+                pix[2, i] = sw * isd
             for i in range(nk):
                 p0, p1, p2 = P[k, i, 0], P[k, i, 1], P[k, i, 2]
                 q0 = a00 * p0 + a01 * p1 + a02 * p2
@@ -580,16 +591,13 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
                 q2 = a20 * p0 + a21 * p1 + a22 * p2
                 zc = q2 + tz
                 z = zc if abs(zc) > 1e-9 else 1e-9
-                iz = 1.0 / z
+                iz = pix[0, i]
                 fiz = f * iz
                 uh = (q0 + tx) * fiz
                 vh = (q1 + ty) * fiz
                 gain = 1.0 + (Ut[k, i, 0] * g0 + Ut[k, i, 1] * g1)
-                w = 1.0 / (1.0 + (e2u * r[i, 0] ** 2 + e2u * r[i, 1] ** 2 + e2d * r[i, 2] ** 2))
-                W[k, i] = w
-                sw = np.sqrt(w)
-                su = sw * isp
-                sd = sw * isd
+                su = pix[1, i]
+                sd = pix[2, i]
                 a = fiz * su
                 aq0, aq1, aq2 = q0 * a, q1 * a, q2 * a
                 izs = iz * su
