@@ -13,7 +13,9 @@ reports it (``mirrored``) so that no pose is made from it.
 
 Every object is fitted on its own (its own focal length), all objects at once: the arrays are
 padded to (objects, pixels) and every step is a batched numpy operation. Gauss-Newton with a
-little Levenberg damping and Cauchy weights against outliers.
+little Levenberg damping and Cauchy weights against outliers. Where the compiled kernels are on
+(``compiled.ENABLED``), one kernel does the same mathematics in loops over each object's pixels,
+forming the normal equations from the Jacobian's non-zero entries only.
 """
 from __future__ import annotations
 
@@ -21,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import compiled
+from .compiled import kernel
 from .robust import MAD_TO_SIGMA
 
 _CAUCHY = 3.0  # robust weight 1 / (1 + (e / c)^2) of a pixel whose normalised residual is e
@@ -159,6 +163,15 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
     """
     rng = np.random.default_rng(0) if rng is None else rng
     X, D, P, V = _pad(instances, max_pixels, rng)
+    if compiled.ENABLED:
+        n = V.sum(1)
+        (logf, var, logs, Rm, t, quality, mirrored, sig_px, sig_d, inliers, relief, tilt,
+         tilt_chi2) = _fit_kernel(X, D, P, n, float(focal0), bool(fix_focal), int(iterations),
+                                  bool(depth_tilt), bool(proper))
+        ok = (np.isfinite(logf) & np.isfinite(logs) & np.all(np.isfinite(t), -1)
+              & (t[:, 2] > 0) & (n >= 6))
+        return ObjectFits(np.exp(logf), var, np.exp(logs), Rm, t, quality, mirrored, sig_px, sig_d,
+                          inliers / np.maximum(n, 1), n, ok, relief, tilt, tilt_chi2)
     o, m = D.shape
     Vf = V.astype(np.float64)
     logf = np.full(o, np.log(focal0))
@@ -295,3 +308,453 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
                       (w_rob > 0.5 * Vf).sum(1) / np.maximum(V.sum(1), 1), V.sum(1), ok, relief,
                       tilt,
                       np.where(np.isfinite(tilt_chi2), tilt_chi2, 0.0))
+
+
+# The compiled path: ``_fit_kernel`` and its helpers do what fit_objects' numpy code does, object
+# by object over the first n[k] (the valid) pixels of the padded arrays. The helpers are compiled
+# into the kernel that calls them (numba's register_jitable), not kernels of their own: a kernel
+# loaded from the disk cache never compiles its callees, so ``warm_up`` would not reach them.
+if compiled.numba is not None:
+    from numba.extending import register_jitable as _helper
+else:
+    def _helper(fn):
+        return fn
+
+
+@_helper
+def _orthogonal_fit_one(P, Y, W, n, proper):
+    """One object's ``_orthogonal_fit`` over its first n pixels: (s, Q, t, quality, mirrored)."""
+    wsum = 0.0
+    for i in range(n):
+        wsum += W[i]
+    wsum = max(wsum, 1e-300)
+    mp = np.zeros(3)
+    my = np.zeros(3)
+    for i in range(n):
+        wn = W[i] / wsum
+        for c in range(3):
+            mp[c] += wn * P[i, c]
+            my[c] += wn * Y[i, c]
+    cov = np.zeros((3, 3))
+    vp = 0.0
+    vy = 0.0
+    pc = np.empty(3)
+    yc = np.empty(3)
+    for i in range(n):
+        wn = W[i] / wsum
+        for c in range(3):
+            pc[c] = P[i, c] - mp[c]
+            yc[c] = Y[i, c] - my[c]
+        for a in range(3):
+            ya = yc[a] * wn
+            for b in range(3):
+                cov[a, b] += ya * pc[b]
+        vp += wn * (pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2])
+        vy += wn * (yc[0] * yc[0] + yc[1] * yc[1] + yc[2] * yc[2])
+    if not np.all(np.isfinite(cov)):  # numba's SVD refuses non-finite input
+        return np.nan, np.full((3, 3), np.nan), np.full(3, np.nan), np.nan, False
+    U, S, Vt = np.linalg.svd(cov)
+    Q = U @ Vt
+    det = (Q[0, 0] * (Q[1, 1] * Q[2, 2] - Q[1, 2] * Q[2, 1])
+           - Q[0, 1] * (Q[1, 0] * Q[2, 2] - Q[1, 2] * Q[2, 0])
+           + Q[0, 2] * (Q[1, 0] * Q[2, 1] - Q[1, 1] * Q[2, 0]))
+    total = S[0] + S[1] + S[2]
+    proper_total = total - (2 * S[2] if det < 0 else 0.0)
+    denom = max(vp * vy, 1e-300)
+    quality = total ** 2 / denom
+    quality_proper = max(proper_total, 0.0) ** 2 / denom
+    mirrored = det < 0 and quality - quality_proper > 0.2
+    if proper:
+        fix = 1.0 if mirrored else np.sign(det)
+        for a in range(3):
+            U[a, 2] *= fix
+        Q = U @ Vt
+        if not mirrored:
+            total = proper_total
+    s = total / max(vp, 1e-300) if vp > 0 else 0.0
+    t = np.empty(3)
+    for a in range(3):
+        t[a] = my[a] - s * (Q[a, 0] * mp[0] + Q[a, 1] * mp[1] + Q[a, 2] * mp[2])
+    return s, Q, t, min(max(quality, 0.0), 1.0), mirrored
+
+
+@_helper
+def _lu_factor(A, piv):
+    """In-place LU factorisation with partial pivoting (LAPACK getrf's); False at an exactly
+    zero pivot, where numpy's solve and inv raise LinAlgError."""
+    n = A.shape[0]
+    for j in range(n):
+        p = j
+        big = abs(A[j, j])
+        for i in range(j + 1, n):
+            if abs(A[i, j]) > big:
+                big = abs(A[i, j])
+                p = i
+        piv[j] = p
+        if p != j:
+            for c in range(n):
+                A[j, c], A[p, c] = A[p, c], A[j, c]
+        if A[j, j] == 0.0:
+            return False
+        inv = 1.0 / A[j, j]
+        for i in range(j + 1, n):
+            A[i, j] *= inv
+            lij = A[i, j]
+            if lij != 0.0:
+                for c in range(j + 1, n):
+                    A[i, c] -= lij * A[j, c]
+    return True
+
+
+@_helper
+def _lu_solve(LU, piv, b):
+    """Solve with ``_lu_factor``'s factors, in place on b."""
+    n = LU.shape[0]
+    for j in range(n):
+        p = piv[j]
+        if p != j:
+            b[j], b[p] = b[p], b[j]
+    for i in range(n):
+        acc = b[i]
+        for c in range(i):
+            acc -= LU[i, c] * b[c]
+        b[i] = acc
+    for i in range(n - 1, -1, -1):
+        acc = b[i]
+        for c in range(i + 1, n):
+            acc -= LU[i, c] * b[c]
+        b[i] = acc / LU[i, i]
+
+
+@kernel
+def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
+    """fit_objects after the padding: the start, the Gauss-Newton iterations and the outputs.
+
+    Iterations run over all objects in step, as the numpy loop does, so that an exactly
+    singular system stops every object's iterations alike (there numpy's batched solve
+    raises). Each object's normal equations come from one pass over its pixels that fills
+    only the Jacobian's non-zero blocks: u and v depend on neither the tilt nor the other image
+    coordinate's translation, d on neither f, w_z, t_x nor t_y.
+    """
+    o, m = D.shape
+    k0 = 0 if fix_focal else 1
+    npar = k0 + 7 + (2 if depth_tilt else 0)
+    logf = np.full(o, np.log(focal0))
+    logs = np.empty(o)
+    Rm = np.empty((o, 3, 3))
+    t = np.empty((o, 3))
+    quality = np.empty(o)
+    mirrored = np.zeros(o, np.bool_)
+    W = np.zeros((o, m))
+    Ut = np.zeros((o, m, 2))
+    Y = np.empty((m, 3))
+    res = np.empty(m)
+    # The start: two orthogonal fits to the back-projection at focal0, the second with Cauchy
+    # weights from the first's residuals; then the depth tilt's regressor.
+    for k in range(o):
+        nk = n[k]
+        for i in range(nk):
+            dk = D[k, i] / focal0
+            Y[i, 0] = X[k, i, 0] * dk
+            Y[i, 1] = X[k, i, 1] * dk
+            Y[i, 2] = D[k, i]
+            W[k, i] = 1.0
+        for _ in range(2):
+            s, Q, tk, qual, mir = _orthogonal_fit_one(P[k], Y, W[k], nk, proper)
+            nv = 0
+            for i in range(nk):
+                acc = 0.0
+                for c in range(3):
+                    e = Y[i, c] - (s * (Q[c, 0] * P[k, i, 0] + Q[c, 1] * P[k, i, 1]
+                                        + Q[c, 2] * P[k, i, 2]) + tk[c])
+                    acc += e * e
+                res[i] = np.sqrt(acc)
+                if not np.isnan(res[i]):
+                    nv += 1
+            med = 0.0
+            if nv == nk:
+                med = np.median(res[:nk]) if nk > 0 else 0.0
+            elif nv > 0:
+                med = np.median(res[:nk][~np.isnan(res[:nk])])
+            scale = max(_CAUCHY * MAD_TO_SIGMA * med, 1e-12)
+            for i in range(nk):
+                W[k, i] = 1.0 / (1.0 + (res[i] / scale) ** 2)
+        logs[k] = np.log(max(s, 1e-12))
+        Rm[k] = Q
+        t[k] = tk
+        quality[k] = qual
+        mirrored[k] = mir
+        cnt = max(nk, 1)
+        c0 = 0.0
+        c1 = 0.0
+        for i in range(nk):
+            c0 += X[k, i, 0]
+            c1 += X[k, i, 1]
+        c0 /= cnt
+        c1 /= cnt
+        acc = 0.0
+        for i in range(nk):
+            acc += (X[k, i, 0] - c0) ** 2 + (X[k, i, 1] - c1) ** 2
+        span = max(np.sqrt(acc / cnt), 1e-9)
+        for i in range(nk):
+            Ut[k, i, 0] = (X[k, i, 0] - c0) / span
+            Ut[k, i, 1] = (X[k, i, 1] - c1) / span
+    tilt = np.zeros((o, 2))
+    sig_px = np.ones(o)
+    sig_d = np.full(o, 1e-3)
+    H = np.zeros((o, npar, npar))
+    g = np.zeros((o, npar))
+    step = np.empty((o, npar))
+    A = np.empty((npar, npar))
+    piv = np.empty(npar, np.int64)
+    r = np.empty((m, 3))
+    pix = np.empty((3, m))  # per pixel: 1 / z and the row scales su, sd
+    lam = 1e-6
+    # The Jacobian's non-zero entries in two dense blocks: the u and v rows (the 2n columns of
+    # Juv) in the parameters [log f], log s, w (3), t (3) (u's t_y and v's t_x are zero), the d
+    # rows (Jd) in log s, w_x, w_y, t_z, [tilt (2)]; J^T W J is their two small products (BLAS),
+    # added into H at these parameters' places.
+    nuv = k0 + 7  # Juv's rows are the parameters 0 .. nuv - 1
+    nd = 6 if depth_tilt else 4
+    idd = np.array([k0, k0 + 1, k0 + 2, k0 + 6, k0 + 7, k0 + 8])
+    buf_uv = np.empty(9 * 2 * m)
+    buf_d = np.empty(7 * m)
+    for it in range(iterations):
+        last = it == iterations - 1
+        for k in range(o):
+            nk = n[k]
+            f = np.exp(logf[k])
+            sc = np.exp(logs[k])
+            a00, a01, a02 = Rm[k, 0, 0] * sc, Rm[k, 0, 1] * sc, Rm[k, 0, 2] * sc
+            a10, a11, a12 = Rm[k, 1, 0] * sc, Rm[k, 1, 1] * sc, Rm[k, 1, 2] * sc
+            a20, a21, a22 = Rm[k, 2, 0] * sc, Rm[k, 2, 1] * sc, Rm[k, 2, 2] * sc
+            tx, ty, tz = t[k, 0], t[k, 1], t[k, 2]
+            g0, g1 = tilt[k, 0], tilt[k, 1]
+            # Residuals, and the noise levels from them with the previous robust weights.
+            ss0 = 0.0
+            ss1 = 0.0
+            ss2 = 0.0
+            wsum = 0.0
+            for i in range(nk):
+                p0, p1, p2 = P[k, i, 0], P[k, i, 1], P[k, i, 2]
+                q0 = a00 * p0 + a01 * p1 + a02 * p2
+                q1 = a10 * p0 + a11 * p1 + a12 * p2
+                zc = a20 * p0 + a21 * p1 + a22 * p2 + tz
+                z = zc if abs(zc) > 1e-9 else 1e-9
+                iz = 1.0 / z
+                pix[0, i] = iz
+                fiz = f * iz
+                gain = 1.0 + (Ut[k, i, 0] * g0 + Ut[k, i, 1] * g1)
+                r0 = X[k, i, 0] - (q0 + tx) * fiz
+                r1 = X[k, i, 1] - (q1 + ty) * fiz
+                r2 = D[k, i] - zc * gain
+                r[i, 0] = r0
+                r[i, 1] = r1
+                r[i, 2] = r2
+                w = W[k, i]
+                ss0 += r0 * r0 * w
+                ss1 += r1 * r1 * w
+                ss2 += r2 * r2 * w
+                wsum += w
+            wsum = max(wsum, 1e-300)
+            spx = np.sqrt(max((ss0 + ss1) / (2 * wsum), (1e-6) ** 2))
+            sdp = np.sqrt(max(ss2 / wsum, (1e-7 * tz) ** 2))
+            sig_px[k] = spx
+            sig_d[k] = sdp
+            e2u = 0.5 / _CAUCHY ** 2 / spx ** 2
+            e2d = 1.0 / _CAUCHY ** 2 / sdp ** 2
+            if last:
+                for i in range(nk):
+                    W[k, i] = 1.0 / (1.0 + (e2u * r[i, 0] ** 2 + e2u * r[i, 1] ** 2
+                                            + e2d * r[i, 2] ** 2))
+                continue
+            # The new weights, and the normal equations with each row scaled by the square root
+            # of its weight w / sigma^2 (see the numpy loop for the Jacobian's entries). The
+            # scaled residuals are the blocks' last rows: one product gives J^T W J and J^T W r.
+            Juv = buf_uv[:(nuv + 1) * 2 * nk].reshape((nuv + 1, 2 * nk))
+            Jd = buf_d[:(nd + 1) * nk].reshape((nd + 1, nk))
+            c = k0  # log s
+            isp = 1.0 / spx
+            isd = 1.0 / sdp
+            # The new weights and the rows' scales first, in a loop of their own: the divisions
+            # and square roots of many pixels then overlap.
+            for i in range(nk):
+                w = 1.0 / (1.0 + (e2u * r[i, 0] ** 2 + e2u * r[i, 1] ** 2 + e2d * r[i, 2] ** 2))
+                W[k, i] = w
+                sw = np.sqrt(w)
+                pix[1, i] = sw * isp
+                pix[2, i] = sw * isd
+            for i in range(nk):
+                p0, p1, p2 = P[k, i, 0], P[k, i, 1], P[k, i, 2]
+                q0 = a00 * p0 + a01 * p1 + a02 * p2
+                q1 = a10 * p0 + a11 * p1 + a12 * p2
+                q2 = a20 * p0 + a21 * p1 + a22 * p2
+                zc = q2 + tz
+                z = zc if abs(zc) > 1e-9 else 1e-9
+                iz = pix[0, i]
+                fiz = f * iz
+                uh = (q0 + tx) * fiz
+                vh = (q1 + ty) * fiz
+                gain = 1.0 + (Ut[k, i, 0] * g0 + Ut[k, i, 1] * g1)
+                su = pix[1, i]
+                sd = pix[2, i]
+                a = fiz * su
+                aq0, aq1, aq2 = q0 * a, q1 * a, q2 * a
+                izs = iz * su
+                uz = uh * izs
+                vz = vh * izs
+                gs = gain * sd
+                v = nk + i
+                if not fix_focal:
+                    Juv[0, i] = uh * su
+                    Juv[0, v] = vh * su
+                Juv[c, i] = aq0 - uz * q2  # log s
+                Juv[c, v] = aq1 - vz * q2
+                Juv[c + 1, i] = -(uz * q1)  # w
+                Juv[c + 1, v] = -(vz * q1) - aq2
+                Juv[c + 2, i] = uz * q0 + aq2
+                Juv[c + 2, v] = vz * q0
+                Juv[c + 3, i] = -aq1
+                Juv[c + 3, v] = aq0
+                Juv[c + 4, i] = a  # t
+                Juv[c + 4, v] = 0.0
+                Juv[c + 5, i] = 0.0
+                Juv[c + 5, v] = a
+                Juv[c + 6, i] = -uz
+                Juv[c + 6, v] = -vz
+                Jd[0, i] = q2 * gs
+                Jd[1, i] = q1 * gs
+                Jd[2, i] = -(q0 * gs)
+                Jd[3, i] = gs
+                if depth_tilt:
+                    zs = z * sd
+                    Jd[4, i] = Ut[k, i, 0] * zs
+                    Jd[5, i] = Ut[k, i, 1] * zs
+                Juv[nuv, i] = r[i, 0] * su
+                Juv[nuv, v] = r[i, 1] * su
+                Jd[nd, i] = r[i, 2] * sd
+            Muv = np.dot(Juv, Juv.T)
+            Md = np.dot(Jd, Jd.T)
+            Hk = H[k]
+            gk = g[k]
+            Hk[:] = 0.0
+            gk[:] = 0.0
+            Hk[:nuv, :nuv] = Muv[:nuv, :nuv]
+            gk[:nuv] = Muv[nuv, :nuv]
+            for x in range(nd):
+                gk[idd[x]] += Md[nd, x]
+                for y in range(nd):
+                    Hk[idd[x], idd[y]] += Md[x, y]
+        if last:
+            break
+        # The damped steps of all objects, then the updates (none if a system is singular).
+        singular = False
+        for k in range(o):
+            A[:] = H[k]
+            for x in range(npar):
+                A[x, x] += lam * max(H[k, x, x], 1e-12)
+            if not _lu_factor(A, piv):
+                singular = True
+                break
+            step[k] = g[k]
+            _lu_solve(A, piv, step[k])
+        if singular:
+            break
+        for k in range(o):
+            sk = step[k]
+            for x in range(npar):
+                if not np.isfinite(sk[x]):
+                    sk[x] = 0.0
+            if not fix_focal:
+                logf[k] += min(max(sk[0], -0.3), 0.3)
+            logs[k] += min(max(sk[k0], -0.3), 0.3)
+            w0 = min(max(sk[k0 + 1], -0.5), 0.5)
+            w1 = min(max(sk[k0 + 2], -0.5), 0.5)
+            w2 = min(max(sk[k0 + 3], -0.5), 0.5)
+            Rm[k] = _rodrigues_one(w0, w1, w2) @ Rm[k]
+            t[k, 0] += sk[k0 + 4]
+            t[k, 1] += sk[k0 + 5]
+            t[k, 2] += sk[k0 + 6]
+            if depth_tilt:
+                tilt[k, 0] += min(max(sk[k0 + 7], -0.05), 0.05)
+                tilt[k, 1] += min(max(sk[k0 + 8], -0.05), 0.05)
+    # Outputs: the covariance from the last system (numpy's inv raises, and the variances are
+    # all infinite, if any object's is exactly singular), the tilt's chi-square, the inlier
+    # count and the model's relief.
+    var = np.full(o, np.inf)
+    tilt_chi2 = np.zeros(o)
+    cov_ok = True
+    for k in range(o):
+        A[:] = H[k]
+        if not _lu_factor(A, piv):
+            cov_ok = False
+            break
+    col = np.empty(npar)
+    ct = np.empty((2, 2))
+    for k in range(o):
+        if not cov_ok:
+            break
+        A[:] = H[k]
+        _lu_factor(A, piv)
+        if not fix_focal:
+            col[:] = 0.0
+            col[0] = 1.0
+            _lu_solve(A, piv, col)
+            if np.isfinite(col[0]) and col[0] > 0:
+                var[k] = col[0]
+        if depth_tilt:
+            for x in range(2):
+                col[:] = 0.0
+                col[npar - 2 + x] = 1.0
+                _lu_solve(A, piv, col)
+                ct[0, x] = col[npar - 2]
+                ct[1, x] = col[npar - 1]
+            if np.all(np.isfinite(ct)):
+                pc = np.linalg.pinv(ct)
+                chi2 = 0.0
+                for x in range(2):
+                    for y in range(2):
+                        chi2 += tilt[k, x] * pc[x, y] * tilt[k, y]
+                if np.isfinite(chi2):
+                    tilt_chi2[k] = chi2
+    inliers = np.zeros(o, np.int64)
+    relief = np.zeros(o)
+    for k in range(o):
+        nk = n[k]
+        cnt = max(nk, 1)
+        sc = np.exp(logs[k])
+        a20, a21, a22 = Rm[k, 2, 0] * sc, Rm[k, 2, 1] * sc, Rm[k, 2, 2] * sc
+        mz = 0.0
+        for i in range(nk):
+            mz += a20 * P[k, i, 0] + a21 * P[k, i, 1] + a22 * P[k, i, 2]
+            if W[k, i] > 0.5:
+                inliers[k] += 1
+        mz /= cnt
+        acc = 0.0
+        for i in range(nk):
+            acc += (a20 * P[k, i, 0] + a21 * P[k, i, 1] + a22 * P[k, i, 2] - mz) ** 2
+        relief[k] = np.sqrt(acc / cnt)
+    return (logf, var, logs, Rm, t, quality, mirrored, sig_px, sig_d, inliers, relief, tilt,
+            tilt_chi2)
+
+
+@_helper
+def _rodrigues_one(w0, w1, w2):
+    """``_rodrigues`` of one rotation vector."""
+    th = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    d = th if th > 0 else 1.0
+    k = np.array([w0 / d, w1 / d, w2 / d])
+    s = np.sin(th)
+    c = np.cos(th)
+    R = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = (k[a] * (1.0 - c)) * k[b]
+        R[a, a] += c
+    R[0, 1] -= k[2] * s
+    R[0, 2] += k[1] * s
+    R[1, 0] += k[2] * s
+    R[1, 2] -= k[0] * s
+    R[2, 0] -= k[1] * s
+    R[2, 1] += k[0] * s
+    return R
