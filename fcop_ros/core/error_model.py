@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import compiled
+from .compiled import kernel
 from .object_fit import ObjectFits
 
 _CAUCHY = 3.0  # the fit's robust weight scale (object_fit._CAUCHY)
@@ -39,6 +41,17 @@ def depth_influence(instances, fits: ObjectFits, max_pixels: int = 300,
     if o == 0:
         return out
     m = min(max(len(i.d) for i in instances), max_pixels)
+    if compiled.ENABLED:
+        sizes = np.array([len(i.d) for i in instances], dtype=np.int64)
+        out = _influence_kernel(
+            np.concatenate([i.x for i in instances]).astype(np.float64, copy=False),
+            np.concatenate([i.d for i in instances]).astype(np.float64, copy=False),
+            np.concatenate([i.p for i in instances]).astype(np.float64, copy=False),
+            np.concatenate([[0], np.cumsum(sizes)]), m, fits.focal, fits.scale,
+            np.ascontiguousarray(fits.rotation), np.ascontiguousarray(fits.translation),
+            np.ascontiguousarray(fits.tilt), fits.sigma_px, fits.sigma_depth, depth_tilt)
+        out[~(fits.ok & np.all(np.isfinite(out), 1))] = np.nan
+        return out
     X = np.zeros((o, 2, m))
     D = np.ones((o, m))
     P = np.zeros((o, 3, m))
@@ -110,12 +123,139 @@ def depth_influence(instances, fits: ObjectFits, max_pixels: int = 300,
     return out
 
 
-def object_variances(instances, support, fits: ObjectFits, good, spread, options):
+@kernel
+def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, tilt,
+                      sigma_px, sigma_depth, depth_tilt):
+    """:func:`depth_influence`'s numbers, one object at a time: the same pixels (every k-th),
+    predictions, robust weights and Jacobian rows, H and J_d^T W_d phi accumulated pixel by
+    pixel, and a 10x10 elimination with partial pivoting (NaN where H is singular)."""
+    o = offsets.size - 1
+    npar = 10 if depth_tilt else 8
+    out = np.full((o, 2), np.nan)
+    idx = np.empty(m, np.int64)
+    zs = np.empty(m)
+    ws = np.empty(m)
+    us = np.empty((m, 2))
+    ju = np.zeros(10)
+    jv = np.zeros(10)
+    jd = np.zeros(10)
+    for k in range(o):
+        start, n = offsets[k], offsets[k + 1] - offsets[k]
+        cnt = min(n, m)
+        if cnt == 0:
+            continue
+        for j in range(cnt):
+            idx[j] = start + (j * (n - 1) // max(m - 1, 1) if n > m else j)
+        cx = 0.0
+        cy = 0.0
+        for j in range(cnt):
+            cx += x[idx[j], 0]
+            cy += x[idx[j], 1]
+        cx /= cnt
+        cy /= cnt
+        ss = 0.0
+        for j in range(cnt):
+            ss += (x[idx[j], 0] - cx) ** 2 + (x[idx[j], 1] - cy) ** 2
+        span = max(np.sqrt(ss / cnt), 1e-9)
+        f, s = focal[k], scale[k]
+        sp = max(sigma_px[k], 1e-6)
+        sd = max(sigma_depth[k], 1e-12)
+        zsum = 0.0
+        for j in range(cnt):  # predictions, weights
+            i = idx[j]
+            q0 = p[i, 0] - 0.5
+            q1 = p[i, 1] - 0.5
+            q2 = p[i, 2] - 0.5
+            xc = s * (rotation[k, 0, 0] * q0 + rotation[k, 0, 1] * q1 + rotation[k, 0, 2] * q2)
+            yc = s * (rotation[k, 1, 0] * q0 + rotation[k, 1, 1] * q1 + rotation[k, 1, 2] * q2)
+            zc = s * (rotation[k, 2, 0] * q0 + rotation[k, 2, 1] * q1 + rotation[k, 2, 2] * q2)
+            xc += translation[k, 0]
+            yc += translation[k, 1]
+            zc += translation[k, 2]
+            z = zc if abs(zc) > 1e-9 else 1e-9
+            us[j, 0] = (x[i, 0] - cx) / span
+            us[j, 1] = (x[i, 1] - cy) / span
+            gain = 1.0 + us[j, 0] * tilt[k, 0] + us[j, 1] * tilt[k, 1]
+            ru = x[i, 0] - f * xc / z
+            rv = x[i, 1] - f * yc / z
+            rd = d[i] - z * gain
+            e2 = (ru * ru + rv * rv) / (2 * sp * sp) + rd * rd / (sd * sd)
+            ws[j] = 1.0 / (1.0 + e2 / 9.0)
+            zs[j] = z
+            zsum += z
+        zm = zsum / cnt
+        H = np.zeros((10, 10))
+        G = np.zeros((10, 2))
+        for j in range(cnt):
+            i = idx[j]
+            q0 = p[i, 0] - 0.5
+            q1 = p[i, 1] - 0.5
+            q2 = p[i, 2] - 0.5
+            qx = s * (rotation[k, 0, 0] * q0 + rotation[k, 0, 1] * q1 + rotation[k, 0, 2] * q2)
+            qy = s * (rotation[k, 1, 0] * q0 + rotation[k, 1, 1] * q1 + rotation[k, 1, 2] * q2)
+            qz = s * (rotation[k, 2, 0] * q0 + rotation[k, 2, 1] * q1 + rotation[k, 2, 2] * q2)
+            z = zs[j]
+            a = f / z
+            u = (qx + translation[k, 0]) * a
+            v = (qy + translation[k, 1]) * a
+            uz = u / z
+            vz = v / z
+            g = 1.0 + us[j, 0] * tilt[k, 0] + us[j, 1] * tilt[k, 1]
+            ju[0], ju[1], ju[2] = u, a * qx - uz * qz, -uz * qy
+            ju[3], ju[4], ju[5], ju[6], ju[7] = a * qz + uz * qx, -a * qy, a, 0.0, -uz
+            jv[0], jv[1], jv[2] = v, a * qy - vz * qz, -a * qz - vz * qy
+            jv[3], jv[4], jv[5], jv[6], jv[7] = vz * qx, a * qx, 0.0, a, -vz
+            jd[0], jd[1], jd[2], jd[3], jd[4] = 0.0, g * qz, g * qy, -g * qx, 0.0
+            jd[5], jd[6], jd[7], jd[8], jd[9] = 0.0, 0.0, g, z * us[j, 0], z * us[j, 1]
+            wu = ws[j] / (sp * sp)
+            wd = ws[j] / (sd * sd)
+            for r in range(npar):
+                for c in range(r, npar):
+                    H[r, c] += wu * (ju[r] * ju[c] + jv[r] * jv[c]) + wd * jd[r] * jd[c]
+                G[r, 0] += wd * jd[r] * (z - zm)
+                G[r, 1] += wd * jd[r]
+        for r in range(npar):
+            for c in range(r):
+                H[r, c] = H[c, r]
+        # Gaussian elimination with partial pivoting on [H | G].
+        singular = False
+        for c in range(npar):
+            piv = c
+            for r in range(c + 1, npar):
+                if abs(H[r, c]) > abs(H[piv, c]):
+                    piv = r
+            if not abs(H[piv, c]) > 0.0:
+                singular = True
+                break
+            if piv != c:
+                for cc in range(npar):
+                    H[c, cc], H[piv, cc] = H[piv, cc], H[c, cc]
+                G[c, 0], G[piv, 0] = G[piv, 0], G[c, 0]
+                G[c, 1], G[piv, 1] = G[piv, 1], G[c, 1]
+            for r in range(c + 1, npar):
+                fct = H[r, c] / H[c, c]
+                for cc in range(c, npar):
+                    H[r, cc] -= fct * H[c, cc]
+                G[r, 0] -= fct * G[c, 0]
+                G[r, 1] -= fct * G[c, 1]
+        if singular:
+            continue
+        for col in range(2):
+            for r in range(npar - 1, -1, -1):
+                acc = G[r, col]
+                for cc in range(r + 1, npar):
+                    acc -= H[r, cc] * G[cc, col]
+                G[r, col] = acc / H[r, r]
+            out[k, col] = G[0, col]
+    return out
+
+
+def object_variances(support, fits: ObjectFits, good, spread, raw_spread, options):
     """Per object (O,): the fit's variance of log f plus the systematic terms.
 
-    instances / support: the objects' raw and NOCS-calibrated correspondences (the fit's input);
-    good: the objects whose fit is used (they pool the tilts); spread: rms distance of each
-    object's (calibrated) NOCS from their centroid. Terms, in log f: a smooth depth-error
+    support: the objects' NOCS-calibrated correspondences (the fit's input); good: the objects
+    whose fit is used (they pool the tilts); spread / raw_spread: rms distance of each object's
+    calibrated / raw NOCS from their centroid. Terms, in log f: a smooth depth-error
     field's curvature, taken as ``unseen_depth_error`` times the rms of the fitted tilts over
     the frame's objects, changes an object's relief by about that times z, so its log f by that
     times z / relief times the relief derivative; ``shape_error`` times the square root of the
@@ -130,9 +270,8 @@ def object_variances(instances, support, fits: ObjectFits, good, spread, options
     # for a perfect shape.
     noise_y = np.array([np.mean(i.var_d) for i in support]) / np.maximum(
         fits.scale**2 * spread**2, 1e-300)
-    noise_p = np.array([0.0 if s.var_p is None else
-                        3.0 * np.mean(s.var_p) / max(float(np.sum(np.var(r.p, axis=0))), 1e-300)
-                        for s, r in zip(support, instances)])
+    noise_p = np.array([0.0 if s.var_p is None else 3.0 * np.mean(s.var_p) for s in support])
+    noise_p = noise_p / np.maximum(raw_spread**2, 1e-300)
     kept = (1.0 - np.minimum(noise_y, 0.9)) * (1.0 - np.minimum(noise_p, 0.9))
     quality = np.minimum(fits.quality / kept, 1.0)
     return var + options.shape_error**2 * (1.0 - quality)

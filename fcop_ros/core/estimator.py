@@ -381,7 +381,8 @@ def estimate_focal(
         return est
     # Errors that repeat in every frame show in no residual: their share of each object's
     # variance follows from the fit's lean on depth and on the NOCS (.error_model).
-    var = object_variances(instances, support, fits, good, spread, opt)
+    raw_spread = np.array([_nocs_spread(i.p) for i in instances])
+    var = object_variances(support, fits, good, spread, raw_spread, opt)
     comb = random_effects(
         np.log(fits.focal[good]), var[good], opt.object_tau, opt.object_tau_weight
     )
