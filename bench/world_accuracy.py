@@ -99,12 +99,12 @@ def methods(have_colmap):
 
 def single_frames(presets, frames, first_seed, variant, have_colmap):
     print("| preset | method | median abs error % | p90 % | signed median % | answered | "
-          "coverage of 2 std_rel | ms per frame |")
-    print("|---|---|---|---|---|---|---|---|")
+          "coverage of 2 std_rel | median std_rel % | ms per frame |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for preset in presets:
         data = [world_frame(preset, first_seed + s, variant) for s in range(frames)]
         for name, fn in methods(have_colmap).items():
-            err, cover, t = [], [], 0.0
+            err, cover, std, t = [], [], [], 0.0
             for k, fr in enumerate(data):
                 t0 = time.perf_counter()
                 out = fn(fr, k)
@@ -116,12 +116,15 @@ def single_frames(presets, frames, first_seed, variant, have_colmap):
                 err.append(100 * e)
                 if hasattr(out, "std_rel") and out.std_rel:
                     cover.append(abs(e) <= 2 * out.std_rel)
+                    std.append(100 * out.std_rel)
             err = np.array(err)
             cov = f"{100 * np.mean(cover):.0f}%" if cover else "-"
+            med_std = f"{np.median(std):.2f}" if std else "-"
             print(
                 f"| {preset} | {name} | {np.median(np.abs(err)):.2f} | "
                 f"{np.percentile(np.abs(err), 90):.2f} | "
-                f"{np.median(err):+.2f} | {err.size}/{frames} | {cov} | {1000 * t / frames:.0f} |",
+                f"{np.median(err):+.2f} | {err.size}/{frames} | {cov} | {med_std} | "
+                f"{1000 * t / frames:.0f} |",
                 flush=True,
             )
 
