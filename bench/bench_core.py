@@ -14,7 +14,8 @@ the absolute times. Figures:
   stab_equal_width (the estimator's relative mode) and interval_stabbing (any widths);
 - estimate_focal on 640x480 frames with 5 objects, without poses (target 5 ms on one quiet
   core and <= 0.2x the plain numpy reference of correspondences + votes + stabbing of
-  bench/world_accuracy.py), with poses, the pose stage alone, and a breakdown by stage;
+  bench/world_accuracy.py) beside the package's own numpy path (the compiled kernels off) on
+  the same frames, with poses, the pose stage alone, and a breakdown by stage;
 - a 1000x1000 frame with 10,000 instances, and one sliding-window update with 30 frames.
 
 Times of single operations are the best of repeats; frame times are, per frame, the median of
@@ -165,9 +166,19 @@ def frame_estimate(repeats):
     for fr in frames[:3]:
         estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0)  # warm-up
     obj_px = np.mean([(fr.mask > 0).sum() for fr in frames])
-    no_poses = frame_times(
-        lambda fr, k: estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False), frames,
-        repeats)
+    def no_poses_run():
+        return frame_times(
+            lambda fr, k: estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False),
+            frames, repeats)
+
+    no_poses = no_poses_run()
+    numpy_path = None
+    if compiled.ENABLED:  # the numpy fallback on the same frames, right after
+        compiled.ENABLED = False
+        try:
+            numpy_path = no_poses_run()
+        finally:
+            compiled.ENABLED = True
     ref = frame_times(lambda fr, k: plain_reference(fr, np.random.default_rng(k)), frames,
                       max(1, repeats // 2))
     poses = frame_times(lambda fr, k: estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k), frames,
@@ -178,6 +189,9 @@ def frame_estimate(repeats):
     print(f"estimate_focal 640x480, 5 objects ({obj_px:,.0f} object pixels), without poses: "
           f"median {med:.1f} ms, p95 {np.percentile(no_poses, 95):.1f} ms "
           f"(target 5 ms on one quiet core: {verdict(med <= 5)})")
+    if numpy_path is not None:
+        print(f"  numpy path (FCOP_NUMBA=0) on the same frames: median "
+              f"{np.median(numpy_path):.1f} ms; compiled {med / np.median(numpy_path):.2f}x that")
     print(f"  plain numpy reference (correspondences + votes + stabbing, "
           f"bench/world_accuracy.py): median {np.median(ref):.1f} ms; ratio {ratio:.3f} "
           f"(target <= 0.2: {verdict(ratio <= 0.2)})")
