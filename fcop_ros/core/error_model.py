@@ -136,6 +136,7 @@ def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, 
     zs = np.empty(m)
     ws = np.empty(m)
     us = np.empty((m, 2))
+    qs = np.empty((m, 3))
     ju = np.zeros(10)
     jv = np.zeros(10)
     jd = np.zeros(10)
@@ -166,12 +167,12 @@ def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, 
             q0 = p[i, 0] - 0.5
             q1 = p[i, 1] - 0.5
             q2 = p[i, 2] - 0.5
-            xc = s * (rotation[k, 0, 0] * q0 + rotation[k, 0, 1] * q1 + rotation[k, 0, 2] * q2)
-            yc = s * (rotation[k, 1, 0] * q0 + rotation[k, 1, 1] * q1 + rotation[k, 1, 2] * q2)
-            zc = s * (rotation[k, 2, 0] * q0 + rotation[k, 2, 1] * q1 + rotation[k, 2, 2] * q2)
-            xc += translation[k, 0]
-            yc += translation[k, 1]
-            zc += translation[k, 2]
+            for r in range(3):  # q = s R (p - 0.5)
+                qs[j, r] = s * (rotation[k, r, 0] * q0 + rotation[k, r, 1] * q1
+                                + rotation[k, r, 2] * q2)
+            xc = qs[j, 0] + translation[k, 0]
+            yc = qs[j, 1] + translation[k, 1]
+            zc = qs[j, 2] + translation[k, 2]
             z = zc if abs(zc) > 1e-9 else 1e-9
             us[j, 0] = (x[i, 0] - cx) / span
             us[j, 1] = (x[i, 1] - cy) / span
@@ -180,20 +181,14 @@ def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, 
             rv = x[i, 1] - f * yc / z
             rd = d[i] - z * gain
             e2 = (ru * ru + rv * rv) / (2 * sp * sp) + rd * rd / (sd * sd)
-            ws[j] = 1.0 / (1.0 + e2 / 9.0)
+            ws[j] = 1.0 / (1.0 + e2 / _CAUCHY**2)
             zs[j] = z
             zsum += z
         zm = zsum / cnt
         H = np.zeros((10, 10))
         G = np.zeros((10, 2))
         for j in range(cnt):
-            i = idx[j]
-            q0 = p[i, 0] - 0.5
-            q1 = p[i, 1] - 0.5
-            q2 = p[i, 2] - 0.5
-            qx = s * (rotation[k, 0, 0] * q0 + rotation[k, 0, 1] * q1 + rotation[k, 0, 2] * q2)
-            qy = s * (rotation[k, 1, 0] * q0 + rotation[k, 1, 1] * q1 + rotation[k, 1, 2] * q2)
-            qz = s * (rotation[k, 2, 0] * q0 + rotation[k, 2, 1] * q1 + rotation[k, 2, 2] * q2)
+            qx, qy, qz = qs[j, 0], qs[j, 1], qs[j, 2]
             z = zs[j]
             a = f / z
             u = (qx + translation[k, 0]) * a
