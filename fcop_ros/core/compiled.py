@@ -1,11 +1,12 @@
-"""Compiled kernels: the core's per-pixel loops as numba functions, with numpy as the fallback.
+"""How the core compiles its per-pixel loops: numba, with numpy as the fallback.
 
+Each module of the core keeps its ``@kernel`` functions beside the numpy code they replace.
 Where numba is installed (a pip requirement; rosdep key python3-numba) and the environment
-variable FCOP_NUMBA is not 0, the modules of the core call their ``@kernel`` functions; else
-they run the numpy code each kernel replaces, which stays beside it. Both give the same
-results up to rounding (the tests compare them on the same frames). Kernels compile on first
-use (a few seconds; ``warm_up`` does it ahead), are cached on disk, and release the GIL, so
-the node's executor thread runs while the estimator thread computes.
+variable FCOP_NUMBA is not 0, the modules call the kernels; else they run the numpy code. Both
+give the same results up to rounding (the tests compare them on the same frames). Kernels
+compile on first use (about 40 s on a 2-core machine; ``warm_up`` does it ahead), are cached on
+disk (about 0.4 s to load after), and release the GIL, so the node's executor thread runs while
+the estimator thread computes.
 """
 from __future__ import annotations
 

@@ -116,8 +116,13 @@ def depth_influence(instances, fits: ObjectFits, max_pixels: int = 300,
     with np.errstate(all="ignore"):
         try:
             dtheta = np.linalg.solve(H, G)
-        except np.linalg.LinAlgError:
-            dtheta = np.stack([np.linalg.lstsq(h, g, rcond=None)[0] for h, g in zip(H, G)])
+        except np.linalg.LinAlgError:  # an exactly singular H: NaN for that object, as compiled
+            dtheta = np.full(G.shape, np.nan)
+            for k in range(o):
+                try:
+                    dtheta[k] = np.linalg.solve(H[k], G[k])
+                except np.linalg.LinAlgError:
+                    pass
     out = dtheta[:, 0, :]
     out[~(fits.ok & np.all(np.isfinite(out), 1))] = np.nan
     return out
