@@ -233,7 +233,7 @@ def test_kernels_that_fail_to_build_leave_the_numpy_estimator(harness, monkeypat
     h = harness()
     fr = clean_frame(2)
     assert h.frame(frame_messages(fr, T0))
-    assert not compiled.ENABLED
+    assert not compiled.ENABLED and not h.node._warming_up
     assert spin_until(h.ex, lambda: len(h.info) == 1, 10)
     assert abs(h.info.msgs[0].k[0] / fr.focal - 1) < 1e-3
 

@@ -250,6 +250,12 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "no focal estimate yet: no frames",
         ),
         (
+            {"window": WindowEstimate(None, reason="no frames"), "warming_up": True},
+            QUIET,
+            DiagnosticStatus.WARN,
+            "no focal estimate yet: the estimator is preparing its kernels",
+        ),
+        (
             {"publishable": False, "window": WindowEstimate(600.0, std_rel=0.2)},
             QUIET,
             DiagnosticStatus.WARN,

@@ -23,7 +23,8 @@ class DiagnosticsInput:
     whether its focal is within max_uncertainty (CameraInfo goes out); ``busy_for`` / ``age``:
     seconds the estimator has been busy with one frame / since it finished the last (None: idle /
     never); ``processing_ms``: recent per-frame estimation times; ``kernels``: what runs the
-    estimator's kernels (numba or the numpy fallback)."""
+    estimator's kernels (numba or the numpy fallback); ``warming_up``: the estimator thread is
+    still compiling or loading them."""
 
     now: float
     window: object
@@ -42,6 +43,7 @@ class DiagnosticsInput:
     rejected: dict = field(default_factory=dict)
     warnings: dict = field(default_factory=dict)
     kernels: str = ""
+    warming_up: bool = False
 
 
 @dataclass(frozen=True)
@@ -80,8 +82,9 @@ class RateWindow:
 
 def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     """(level, message, {key: value}) of the node's status: ERROR when the estimator is stalled,
-    WARN without a focal, with one held back by max_uncertainty, or when the estimator skipped
-    more frames than it estimated lately; else OK."""
+    WARN without a focal (saying so while the kernels are being prepared), with one held back by
+    max_uncertainty, or when the estimator skipped more frames than it estimated lately; else
+    OK."""
     win = d.window
     std = getattr(win, "std_rel", None)
     if d.busy_for is not None and d.busy_for > d.max_estimate_age:
@@ -90,6 +93,10 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
             f"estimator stalled: busy with one frame for {d.busy_for:.1f} s (max_estimate_age "
             f"{d.max_estimate_age} s); CameraInfo carries an estimate {d.age or 0:.1f} s old"
         )
+    elif win.focal is None and d.warming_up:
+        level = WARN
+        message = ("no focal estimate yet: the estimator is preparing its kernels (the first run "
+                   "on a machine compiles them, up to a minute)")
     elif win.focal is None:
         level, message = WARN, f"no focal estimate yet: {win.reason}"
     elif not d.publishable:

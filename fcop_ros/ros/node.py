@@ -173,6 +173,7 @@ class FcopNode(Node):
             name="fcop_estimator",
             before=self._warm_up_kernels,
         )
+        self._warming_up = True  # until the worker has its kernels (see _warm_up_kernels)
         self._size = None  # (width, height) of the frames in the window
         self._estimate: _Publishable | None = None
         self._history: deque = deque()  # the window's frames, light, to re-evaluate later
@@ -516,7 +517,13 @@ class FcopNode(Node):
 
     def _warm_up_kernels(self) -> None:
         """Compile the estimator's kernels (or load them from numba's cache) before the first
-        frame; where they cannot be compiled, the numpy paths serve."""
+        frame; where they cannot be compiled, the numpy paths serve. /diagnostics says so
+        meanwhile (a first run on a machine compiles for up to a minute)."""
+        if compiled.ENABLED:
+            self.get_logger().info(
+                "fcop_node: preparing the estimator's kernels (the first run on a machine "
+                "compiles them, up to a minute; later runs load them from the cache)"
+            )
         try:
             seconds = compiled.warm_up()
         except Exception as exc:  # noqa: BLE001 - any compiler failure leaves numpy working
@@ -530,6 +537,8 @@ class FcopNode(Node):
                 self.get_logger().info(
                     f"fcop_node: estimator kernels ready ({compiled.describe()}, {seconds:.1f} s)"
                 )
+        finally:
+            self._warming_up = False
 
     def _on_worker_error(self, item, exc: Exception) -> None:
         """The node must outlive any single bad frame: count it and say which."""
@@ -794,6 +803,7 @@ class FcopNode(Node):
                 rejected=dict(self.rejected),
                 warnings=dict(self.warnings),
                 kernels=compiled.describe(),
+                warming_up=self._warming_up,
             )
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped)
         return diagnostic_status(
