@@ -44,12 +44,15 @@ def kernel(fn):
 
 
 def kernel_helper(fn):
-    """Compile a function that kernels call (not Python): like :func:`kernel`, but not listed in
-    KERNELS, because a kernel loaded from the disk cache carries its helpers' code compiled into
-    it and leaves the helpers themselves uncompiled."""
+    """Mark a function that kernels call (not Python): compiled into each kernel that calls it
+    (numba's register_jitable), not a kernel of its own and not listed in KERNELS, because a
+    kernel loaded from the disk cache never compiles its callees, so ``warm_up`` would not
+    reach them."""
     if numba is None:
         return fn
-    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    from numba.extending import register_jitable
+
+    return register_jitable(fn)
 
 
 def warm_up() -> float:

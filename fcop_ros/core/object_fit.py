@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import compiled
-from .compiled import kernel
+from .compiled import kernel, kernel_helper
 from .robust import MAD_TO_SIGMA
 
 _CAUCHY = 3.0  # robust weight 1 / (1 + (e / c)^2) of a pixel whose normalised residual is e
@@ -310,18 +310,12 @@ def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: i
                       np.where(np.isfinite(tilt_chi2), tilt_chi2, 0.0))
 
 
-# The compiled path: ``_fit_kernel`` and its helpers do what fit_objects' numpy code does, object
-# by object over the first n[k] (the valid) pixels of the padded arrays. The helpers are compiled
-# into the kernel that calls them (numba's register_jitable), not kernels of their own: a kernel
-# loaded from the disk cache never compiles its callees, so ``warm_up`` would not reach them.
-if compiled.numba is not None:
-    from numba.extending import register_jitable as _helper
-else:
-    def _helper(fn):
-        return fn
+# The compiled path: ``_fit_kernel`` and its helpers (compiled into it, see
+# compiled.kernel_helper) do what fit_objects' numpy code does, object by object over the first
+# n[k] (the valid) pixels of the padded arrays.
 
 
-@_helper
+@kernel_helper
 def _orthogonal_fit_one(P, Y, W, n, proper):
     """One object's ``_orthogonal_fit`` over its first n pixels: (s, Q, t, quality, mirrored)."""
     wsum = 0.0
@@ -378,7 +372,7 @@ def _orthogonal_fit_one(P, Y, W, n, proper):
     return s, Q, t, min(max(quality, 0.0), 1.0), mirrored
 
 
-@_helper
+@kernel_helper
 def _lu_factor(A, piv):
     """In-place LU factorisation with partial pivoting (LAPACK getrf's); False at an exactly
     zero pivot, where numpy's solve and inv raise LinAlgError."""
@@ -406,7 +400,7 @@ def _lu_factor(A, piv):
     return True
 
 
-@_helper
+@kernel_helper
 def _lu_solve(LU, piv, b):
     """Solve with ``_lu_factor``'s factors, in place on b."""
     n = LU.shape[0]
@@ -738,7 +732,7 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
             tilt_chi2)
 
 
-@_helper
+@kernel_helper
 def _rodrigues_one(w0, w1, w2):
     """``_rodrigues`` of one rotation vector."""
     th = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
