@@ -19,9 +19,7 @@ import numpy as np
 
 from . import compiled
 from .compiled import kernel
-from .object_fit import ObjectFits
-
-_CAUCHY = 3.0  # the fit's robust weight scale (object_fit._CAUCHY)
+from .object_fit import _CAUCHY, ObjectFits, _lu_factor, _lu_solve
 
 #: The depth-error patterns, in the order of :func:`depth_influence`'s columns.
 PATTERNS = ("relief", "offset")
@@ -133,7 +131,7 @@ def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, 
                       sigma_px, sigma_depth, depth_tilt):
     """:func:`depth_influence`'s numbers, one object at a time: the same pixels (every k-th),
     predictions, robust weights and Jacobian rows, H and J_d^T W_d phi accumulated pixel by
-    pixel, and a 10x10 elimination with partial pivoting (NaN where H is singular)."""
+    pixel, and the fit's LU solve (NaN where H is exactly singular)."""
     o = offsets.size - 1
     npar = 10 if depth_tilt else 8
     out = np.full((o, 2), np.nan)
@@ -145,6 +143,7 @@ def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, 
     ju = np.zeros(10)
     jv = np.zeros(10)
     jd = np.zeros(10)
+    piv = np.empty(npar, np.int64)
     for k in range(o):
         start, n = offsets[k], offsets[k + 1] - offsets[k]
         cnt = min(n, m)
@@ -217,36 +216,13 @@ def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, 
         for r in range(npar):
             for c in range(r):
                 H[r, c] = H[c, r]
-        # Gaussian elimination with partial pivoting on [H | G].
-        singular = False
-        for c in range(npar):
-            piv = c
-            for r in range(c + 1, npar):
-                if abs(H[r, c]) > abs(H[piv, c]):
-                    piv = r
-            if not abs(H[piv, c]) > 0.0:
-                singular = True
-                break
-            if piv != c:
-                for cc in range(npar):
-                    H[c, cc], H[piv, cc] = H[piv, cc], H[c, cc]
-                G[c, 0], G[piv, 0] = G[piv, 0], G[c, 0]
-                G[c, 1], G[piv, 1] = G[piv, 1], G[c, 1]
-            for r in range(c + 1, npar):
-                fct = H[r, c] / H[c, c]
-                for cc in range(c, npar):
-                    H[r, cc] -= fct * H[c, cc]
-                G[r, 0] -= fct * G[c, 0]
-                G[r, 1] -= fct * G[c, 1]
-        if singular:
+        A = H[:npar, :npar].copy()
+        if not _lu_factor(A, piv):
             continue
         for col in range(2):
-            for r in range(npar - 1, -1, -1):
-                acc = G[r, col]
-                for cc in range(r + 1, npar):
-                    acc -= H[r, cc] * G[cc, col]
-                G[r, col] = acc / H[r, r]
-            out[k, col] = G[0, col]
+            b = G[:npar, col].copy()
+            _lu_solve(A, piv, b)
+            out[k, col] = b[0]
     return out
 
 
