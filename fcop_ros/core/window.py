@@ -4,7 +4,7 @@ Each frame contributes its estimate y_t = log f_t, its variance v_t = std_rel_t^
 of it that pixel noise makes, n_t = std_rel_noise_t^2 (a new frame draws it anew). The rest,
 v_t - n_t, is the frame's systematic error budget (shape mismatch, unseen depth error, the
 objects' disagreement): it repeats while the same objects are in view, unless the frames show
-otherwise. The window's estimate weights every frame by 1 / v_t. Its variance is
+otherwise. The window's variance is
 
     V = max(B - Q, 0) + max(S^2, N) / n_eff
 
@@ -14,6 +14,13 @@ noise that the spread shows beyond doubt (its one-standard-error lower bound): t
 budget varies from frame to frame and averages out; the rest cannot. Errors that drift slowly
 (lag-one autocorrelation rho) average out over n_eff = n (1 - rho) / (1 + rho) frames, not n.
 A frame without ``std_rel_noise`` counts as all noise.
+
+The estimate weights every frame by the part of its variance that varies: 1 / (n_t + q (v_t -
+n_t)), with q = Q / B the share of the budget that the spread shows to vary (measured about
+the mean weighted by 1 / v_t; 1 without a budget). An error common to all frames shifts every
+frame alike and says nothing about which frame to trust: frames that share one error are
+weighed by their noise, frames whose budgets vary independently by their whole variance. V is
+taken about this estimate, with its weights.
 
 Frames further than ``reject_sigma`` robust standard deviations of the frames' own spread (at
 least their noise) from the median are left out: a frame whose objects were all wrong.
@@ -195,20 +202,34 @@ class FocalWindow:
             )
             keep = np.abs(y - med) <= self.options.reject_sigma * spread
             y, v, noise = y[keep], v[keep], noise[keep]
-        w = 1.0 / v
-        mean = float(np.sum(w * y) / w.sum())
         n = y.size
         budget = float(np.median(v - noise))
         noise_var = n / float(np.sum(1.0 / noise))
+        w = 1.0 / v
+        mean = float(np.sum(w * y) / w.sum())
         var = budget + noise_var / n  # too few frames to see what varies
         if n >= 3:
-            r = y - mean
-            spread2 = float(np.sum(w * r * r) / (n - 1)) * n / float(w.sum())
-            rho = _lag_one(r)
-            n_eff = max(n * (1.0 - rho) / (1.0 + rho), 1.0)
-            varies = max(spread2 * max(1.0 - np.sqrt(2.0 / n_eff), 0.0) - noise_var, 0.0)
-            var = max(budget - varies, 0.0) + max(spread2, noise_var) / n_eff
+            varies, var = self._spread(y, w, mean, budget, noise_var)
+            # The budget that repeats is common to the frames and weighs none of them: weight
+            # each by the part of its variance that varies (its noise and the varying share
+            # of its budget), then measure again about the new mean.
+            share = min(varies / budget, 1.0) if budget > 0 else 1.0
+            w = 1.0 / (noise + share * (v - noise))
+            mean = float(np.sum(w * y) / w.sum())
+            _, var = self._spread(y, w, mean, budget, noise_var)
         return WindowEstimate(float(np.exp(mean)), float(np.sqrt(var)), support, n_all, n)
+
+    @staticmethod
+    def _spread(y, w, mean, budget, noise_var):
+        """(variance that varies from frame to frame beyond noise, variance of the weighted
+        mean) of frames y with weights w about ``mean``; see the module docstring."""
+        n = y.size
+        r = y - mean
+        spread2 = float(np.sum(w * r * r) / (n - 1)) * n / float(w.sum())
+        rho = _lag_one(r)
+        n_eff = max(n * (1.0 - rho) / (1.0 + rho), 1.0)
+        varies = max(spread2 * max(1.0 - np.sqrt(2.0 / n_eff), 0.0) - noise_var, 0.0)
+        return varies, max(budget - varies, 0.0) + max(spread2, noise_var) / n_eff
 
 
 def _lag_one(r: np.ndarray) -> float:
