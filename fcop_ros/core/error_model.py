@@ -226,19 +226,20 @@ def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, 
     return out
 
 
-def object_variances(support, fits: ObjectFits, good, spread, raw_spread, options):
+def object_variances(support, fits: ObjectFits, good, spread, raw_spread, relief_lean,
+                     options):
     """Per object (O,): the fit's variance of log f plus the systematic terms.
 
     support: the objects' NOCS-calibrated correspondences (the fit's input); good: the objects
     whose fit is used (they pool the tilts); spread / raw_spread: rms distance of each object's
-    calibrated / raw NOCS from their centroid. Terms, in log f: a smooth depth-error
+    calibrated / raw NOCS from their centroid; relief_lean: each object's d log f per unit of
+    relief error (:func:`depth_influence`'s first column). Terms, in log f: a smooth depth-error
     field's curvature, taken as ``unseen_depth_error`` times the rms of the fitted tilts over
     the frame's objects, changes an object's relief by about that times z, so its log f by that
     times z / relief times the relief derivative; ``shape_error`` times the square root of the
     shape share the similarity leaves unexplained, not counting the share that the measured
     depth and NOCS noise alone would leave.
     """
-    relief_lean = depth_influence(support, fits, options.fit_pixels, options.depth_tilt)[:, 0]
     curvature = options.unseen_depth_error * np.sqrt(np.mean(fits.tilt[good] ** 2))
     unseen = curvature * fits.translation[:, 2] / np.maximum(fits.relief, 1e-9)
     var = fits.var_log_focal + (unseen * relief_lean) ** 2

@@ -20,7 +20,7 @@ from . import compiled
 from .combine import random_effects
 from .camera import image_centre
 from .correspondences import Instance, calibrated_nocs, check_images, extract_instances
-from .error_model import object_variances
+from .error_model import depth_influence, object_variances
 from .object_fit import fit_objects
 from .pose import ObjectPose, umeyama
 from .solver import object_votes, solve_triplets
@@ -382,10 +382,14 @@ def estimate_focal(
     # Errors that repeat in every frame show in no residual: their share of each object's
     # variance follows from the fit's lean on depth and on the NOCS (.error_model).
     raw_spread = np.array([_nocs_spread(i.p) for i in instances])
-    var = object_variances(support, fits, good, spread, raw_spread, opt)
-    comb = random_effects(
-        np.log(fits.focal[good]), var[good], opt.object_tau, opt.object_tau_weight
-    )
+    relief_lean = depth_influence(support, fits, opt.fit_pixels, opt.depth_tilt)[:, 0]
+    var = object_variances(support, fits, good, spread, raw_spread, relief_lean, opt)
+    # The objects' prior spread stands for the depth network's errors of each object's relief,
+    # which move f by the fits' lean on depth: about one for one with noisy NOCS, almost nothing
+    # when exact NOCS let the pixels fix f.
+    lean = relief_lean[good][np.isfinite(relief_lean[good])]
+    tau0 = opt.object_tau * (float(np.sqrt(np.mean(lean**2))) if lean.size else 1.0)
+    comb = random_effects(np.log(fits.focal[good]), var[good], tau0, opt.object_tau_weight)
     if comb is None:
         est.reason = "no finite per-object estimate"
         return est

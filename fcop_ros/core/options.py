@@ -75,8 +75,9 @@ class EstimatorOptions:
     curvature of a smooth depth-error field, which the fit's tilt does not absorb, relative to
     the tilts it found, weighed by how much the object's fit leans on its depths),
     ``shape_error`` (per object, times the square root of its unexplained shape share beyond
-    what noise explains), and a prior between-object spread ``object_tau`` worth
-    ``object_tau_weight`` objects. No pose for an object whose own std_rel exceeds
+    what noise explains), and a prior between-object spread ``object_tau`` (the spread of the
+    depth network's relief errors, times the objects' rms derivative of log f by relief)
+    worth ``object_tau_weight`` objects. No pose for an object whose own std_rel exceeds
     ``pose_max_std``.
 
     ``method``: "stabbing" (the paper's fCOP-IS) or "ransac" (fCOP-RANSAC, ``ransac_hypotheses``
