@@ -14,8 +14,9 @@ estimate_focal, window, poses, publishing; and estimate_focal alone), and the wh
 CPU time per input frame. --slow-ms adds that much (sleeping) to every frame estimate (a
 deliberately slow estimator). Closed loop: the next frame is published when the previous frame's
 poses arrive: the estimator's maximum rate.
-Memory: resident set size (VmRSS) every --mem-every frames of the paced run, with the slope of a
-least-squares line through the samples of the second half (flat means no growth per frame). The
+Memory: resident set size (VmRSS) every --mem-every frames of the paced run (glibc's allocator
+limited to two arenas, as fcop_node's main() does; --glibc-arenas leaves it unlimited), with the
+slope of a least-squares line through the samples of the second half (flat: no growth). The
 benchmark's own records are arrays allocated before the run, so they add nothing while it runs.
 --cores 1 pins the process to one core (the executor thread and the estimator thread).
 --listener process (default) also records, in a second process pinned to the same core, when
@@ -114,6 +115,8 @@ def main() -> None:
                     help="frames between resident-memory samples")
     ap.add_argument("--slow-ms", type=float, default=0.0,
                     help="extra time per frame estimate (ms)")
+    ap.add_argument("--glibc-arenas", action="store_true",
+                    help="leave glibc's allocator arenas unlimited (fcop_node limits them to 2)")
     ap.add_argument("--profile", action="store_true",
                     help="profile the executor thread over the paced run (cProfile)")
     ap.add_argument("--switch-interval", type=float, default=0.0,
@@ -123,6 +126,9 @@ def main() -> None:
                          "same core)")
     ap.add_argument("--listen", metavar="OUT", help=argparse.SUPPRESS)  # the second process
     args = ap.parse_args()
+    if not args.glibc_arenas:
+        from fcop_ros.ros.allocator import limit_allocator_arenas
+        limit_allocator_arenas()  # as fcop_node's main() does, before any thread starts
     if args.switch_interval > 0:
         sys.setswitchinterval(args.switch_interval)
     if args.cores:

@@ -55,6 +55,7 @@ from msg_adapters import (
 
 from ..core import FocalWindow, compiled, estimate_focal, estimate_poses
 from ..core.camera import image_centre
+from .allocator import limit_allocator_arenas
 from .calibration import default_calibration_path, write_calibration
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
 from .params import (
@@ -840,6 +841,7 @@ def main(args=None) -> int:
     """Entry point of ``ros2 run fcop_ros fcop_node``: spin until Ctrl-C or external shutdown.
     Exit codes: 0 after a clean shutdown, 2 for a parameter it cannot run with (one line on
     stderr)."""
+    limit_allocator_arenas()  # before any thread starts: a flat footprint over long runs
     rclpy.init(args=args)
     node = None
     try:
