@@ -21,6 +21,10 @@ are fixed settings of these same mechanisms: each is written once, in :func:`app
 The held-out variant (``variant="heldout"``) builds its smooth fields from random sinusoids
 instead of interpolated grids, its NOCS distortion from a quadratic warp instead of a field and
 its mask errors with an elliptic kernel: a different error model with the same strengths.
+After several rounds of development had looked at it, a second one (``variant="heldout2"``,
+first evaluated on 22 Nov 2026) builds its depth fields from Gaussian bumps, twists each
+object's NOCS about a random axis and shifts each instance's mask (a misregistered
+segmentation) instead of eroding or dilating it.
 """
 from __future__ import annotations
 
@@ -141,6 +145,21 @@ def _sine_field(rng, h, w, cells):
     return out / max(out.std(), 1e-9)
 
 
+def _bump_field(rng, h, w, cells):
+    """A sum of cells^2 + 2 Gaussian bumps of random sign, about 1 / cells of the image wide."""
+    yy, xx = np.mgrid[0:h, 0:w] / max(h, w)
+    out = np.zeros((h, w))
+    for _ in range(cells * cells + 2):
+        cy, cx = rng.uniform(0, h / max(h, w)), rng.uniform(0, w / max(h, w))
+        r = rng.uniform(0.5, 1.0) / cells
+        out += rng.normal() * np.exp(-((yy - cy) ** 2 + (xx - cx) ** 2) / (2 * r * r))
+    return (out - out.mean()) / max(out.std(), 1e-9)
+
+
+VARIANTS = ("tuning", "heldout", "heldout2")
+_FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field}
+
+
 @dataclass
 class ErrorState:
     """What persists across the frames of one sequence under one draw of the error families."""
@@ -156,8 +175,8 @@ class ErrorState:
     @staticmethod
     def start(err: ErrorFamilies, rng: np.random.Generator,
               variant: str = "tuning") -> "ErrorState":
-        if variant not in ("tuning", "heldout"):
-            raise ValueError(f"unknown error-model variant {variant!r}")
+        if variant not in VARIANTS:
+            raise ValueError(f"unknown error-model variant {variant!r}: one of {VARIANTS}")
         st = ErrorState(err, variant)
         st.rho = float(np.sqrt(1.0 - err.field_drift)) if err.field_drift > 0 else 1.0
         st.scale = float(np.exp(rng.normal(0, err.depth_scale))) if err.depth_scale > 0 else 1.0
@@ -165,7 +184,7 @@ class ErrorState:
         return st
 
     def _field(self, key, rng, h, w, cells):
-        make = _sine_field if self.variant == "heldout" else _grid_field
+        make = _FIELDS[self.variant]
         new = make(rng, h, w, cells)
         old = self.fields.get(key)
         if old is not None and old.shape == (h, w):
@@ -236,11 +255,17 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
     if e.depth_pixel > 0:
         depth *= 1.0 + e.depth_pixel * rng.normal(size=(h, w))
     if e.nocs_field > 0:
-        if state.variant == "heldout":
+        if state.variant == "heldout2":
+            nocs = _twist(nocs, mask, state, rng, e.nocs_field)
+        elif state.variant == "heldout":
+            # Scaled to ``nocs_field`` rms on the objects, as the other variants' distortions:
+            # unscaled, q^T W q with |q| < 0.5 moved the NOCS 8x less than the tuning field.
             warp = state.fields.setdefault("nocs_warp", rng.normal(0, 1, (3, 3)))
             q = nocs - 0.5
-            nocs = nocs + e.nocs_field * np.einsum("hwi,ij,hwj->hw", q, warp,
-                                                   q)[..., None] * np.ones(3)
+            bend = np.einsum("hwi,ij,hwj->hw", q, warp, q)
+            rms = float(np.sqrt(np.mean(bend[obj] ** 2))) if obj.any() else 0.0
+            bend *= e.nocs_field / max(rms, 1e-9)
+            nocs = nocs + bend[..., None]
         else:
             for c in range(3):
                 nocs[..., c] += e.nocs_field * state._field(("nocs", c), rng, h, w, 3)
@@ -265,9 +290,27 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
     return replace(frame, depth=depth, nocs=nocs, mask=mask)
 
 
+def _twist(nocs, mask, state, rng, rms):
+    """Each object's NOCS twisted about a random axis through the centre (the angle grows along
+    the axis), scaled to ``rms`` per NOCS axis (as the tuning variant's field per channel): a
+    smooth distortion that persists across a sequence."""
+    out = nocs.copy()
+    for iid in np.unique(mask[mask > 0]):
+        m = mask == iid
+        axis = state.fields.get(("twist", int(iid)))
+        if axis is None:
+            axis = rng.normal(size=3)
+            axis = state.fields.setdefault(("twist", int(iid)), axis / np.linalg.norm(axis))
+        q = nocs[m] - 0.5
+        move = np.cross(axis, q) * (q @ axis)[:, None]
+        out[m] = nocs[m] + rms * move / max(np.sqrt(np.mean(move ** 2)), 1e-9)
+    return out
+
+
 def _mask_errors(mask, nocs, px, rng, variant):
-    """Erode or dilate each instance by up to ``px`` pixels; grown pixels keep the background
-    depth and take the nearest object's NOCS, as a segmentation network's would."""
+    """Erode or dilate (``heldout2``: shift) each instance by up to ``px`` pixels; grown pixels
+    keep the background depth and take the nearest object's NOCS, as a segmentation network's
+    would."""
     shape = cv2.MORPH_ELLIPSE if variant == "heldout" else cv2.MORPH_RECT
     new = np.zeros_like(mask)
     near = np.stack([cv2.dilate(nocs[..., c].astype(np.float32),
@@ -275,7 +318,13 @@ def _mask_errors(mask, nocs, px, rng, variant):
                      for c in range(3)], -1)
     for iid in np.unique(mask[mask > 0]):
         m = (mask == iid).astype(np.uint8)
-        r = int(rng.integers(-px, px + 1))
+        if variant == "heldout2":
+            dx, dy = (int(v) for v in rng.integers(-px, px + 1, 2))
+            m = cv2.warpAffine(m, np.float32([[1, 0, dx], [0, 1, dy]]), m.shape[::-1],
+                               flags=cv2.INTER_NEAREST)
+            r = 0
+        else:
+            r = int(rng.integers(-px, px + 1))
         if r:
             kern = cv2.getStructuringElement(shape, (2 * abs(r) + 1,) * 2)
             m = cv2.dilate(m, kern) if r > 0 else cv2.erode(m, kern)
