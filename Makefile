@@ -35,6 +35,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_node.py --frames 300 --closed-loop-frames 30 --slow-ms 100
 	$(PY) bench/world_accuracy.py --frames 60 --sequences 8
 	$(PY) bench/world_accuracy.py --frames 60 --sequences 8 --heldout
+	$(PY) bench/world_accuracy.py --frames 60 --sequences 8 --heldout2
 	$(PY) bench/world_calibration.py --frames 60
 	$(PY) bench/paper_simulation.py --out docs
 

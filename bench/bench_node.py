@@ -15,7 +15,7 @@ CPU time per input frame. --slow-ms adds that much (sleeping) to every frame est
 deliberately slow estimator). Closed loop: the next frame is published when the previous frame's
 poses arrive: the estimator's maximum rate.
 Memory: resident set size (VmRSS) every --mem-every frames of the paced run (glibc's allocator
-limited to two arenas, as fcop_node's main() does; --glibc-arenas leaves it unlimited), with the
+limited to two arenas, as fcop_node's main() does; --glibc-arenas leaves glibc's default), with the
 slope of a least-squares line through the samples of the second half (flat: no growth). The
 benchmark's own records are arrays allocated before the run, so they add nothing while it runs.
 --cores 1 pins the process to one core (the executor thread and the estimator thread).
@@ -116,7 +116,7 @@ def main() -> None:
     ap.add_argument("--slow-ms", type=float, default=0.0,
                     help="extra time per frame estimate (ms)")
     ap.add_argument("--glibc-arenas", action="store_true",
-                    help="leave glibc's allocator arenas unlimited (fcop_node limits them to 2)")
+                    help="glibc's default arenas (up to 8 per core); fcop_node sets 2")
     ap.add_argument("--profile", action="store_true",
                     help="profile the executor thread over the paced run (cProfile)")
     ap.add_argument("--switch-interval", type=float, default=0.0,
@@ -128,7 +128,7 @@ def main() -> None:
     args = ap.parse_args()
     if not args.glibc_arenas:
         from fcop_ros.ros.allocator import limit_allocator_arenas
-        limit_allocator_arenas()  # as fcop_node's main() does, before any thread starts
+        limit_allocator_arenas()  # as fcop_node's main() does, before the node's threads
     if args.switch_interval > 0:
         sys.setswitchinterval(args.switch_interval)
     if args.cores:

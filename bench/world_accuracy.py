@@ -13,9 +13,10 @@ Single frames, per preset: median and p90 |focal error| (%), signed median (%), 
 with an estimate, and for fcop_ros the coverage of |error| <= 2 std_rel; beside it the paper's
 method taken literally, the 60-line plain reference of the accuracy issue and P4Pf (pycolmap,
 2D-NOCS only, median over objects; skipped without pycolmap). Bias: each zero-mean mechanism
-alone at its full bound. Window: static orbiting sequences of 30 frames (window of 30) against
-the single frames of the same sequences; zoom sequences (x1.25 and x0.8 at frame 20 of 40):
-frames until the window stays within 5% of the new focal length, and restarts on static ones.
+alone, its strength drawn up to its base bound. Window: static orbiting sequences of 30 frames
+(window of 30) against the single frames of the same sequences; zoom sequences (x1.25 and x0.8
+at frame 20 of 40): frames until the window stays within 5% of the new focal length, and
+restarts on static ones.
 """
 from __future__ import annotations
 
@@ -132,7 +133,8 @@ def single_frames(presets, frames, first_seed, variant, have_colmap):
 
 
 def bias(frames, first_seed, variant):
-    print("\n| mechanism alone (full bound) | signed median % | median abs error % | coverage |")
+    print("\n| mechanism alone (strength up to) | signed median % | median abs error % | "
+          "coverage |")
     print("|---|---|---|---|")
     for fam in ZERO_MEAN_FAMILIES:
         err, cover = [], []
@@ -176,7 +178,7 @@ def window(presets, sequences, first_seed, variant):
                 if k < 5:
                     continue
                 restarts += ch
-                # What averaging the same frames could give at best: their median error.
+                # The unweighted median of the same frames' errors, for comparison.
                 seen = np.array(errs[max(0, k - 29): k + 1])
                 if np.isfinite(seen).any():
                     oracle.append(abs(np.nanmedian(seen)))

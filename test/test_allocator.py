@@ -1,5 +1,5 @@
 """fcop_node's allocator limit: glibc's malloc arenas stay at two however many threads allocate
-at once (so the node's memory stays flat over long runs; see fcop_ros/ros/allocator.py)."""
+at once (so the node's memory does not grow in steps over long runs; fcop_ros/ros/allocator.py)."""
 import os
 import subprocess
 import sys
@@ -9,7 +9,7 @@ import pytest
 from fcop_ros.ros.allocator import limit_allocator_arenas
 
 # Eight threads malloc at once (ctypes releases the GIL around each call), then glibc's
-# malloc_stats lists every arena on stderr. Without a limit this machine made 5 arenas.
+# malloc_stats lists every arena on stderr. Without a limit this machine made 5 to 9 arenas.
 SCRIPT = r"""
 import ctypes, sys, threading
 from fcop_ros.ros.allocator import limit_allocator_arenas

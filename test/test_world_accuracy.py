@@ -29,7 +29,8 @@ def signed_errors(preset, n):
     return np.array(err), np.array(cover)
 
 
-# Signed median focal error (%) of each zero-mean mechanism alone at its full bound, 24 frames:
+# Signed median focal error (%) of each zero-mean mechanism alone (strength drawn up to its base
+# bound), 24 frames:
 # measured field +0.00, relief -0.15, offset -0.07, depth_pixel -0.00, nocs_pixel -0.01,
 # nocs_field -0.21, shape -0.18 (relief -0.43, shape -0.17 while the objects' prior spread
 # ignored their lean on depth). (Per-pixel NOCS noise gave +0.56% before the NOCS were

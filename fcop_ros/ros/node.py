@@ -841,7 +841,7 @@ def main(args=None) -> int:
     """Entry point of ``ros2 run fcop_ros fcop_node``: spin until Ctrl-C or external shutdown.
     Exit codes: 0 after a clean shutdown, 2 for a parameter it cannot run with (one line on
     stderr)."""
-    limit_allocator_arenas()  # before any thread starts: a flat footprint over long runs
+    limit_allocator_arenas()  # before the node's threads: no step growth over long runs
     rclpy.init(args=args)
     node = None
     try:

@@ -293,7 +293,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
 def _twist(nocs, mask, state, rng, rms):
     """Each object's NOCS twisted about a random axis through the centre (the angle grows along
     the axis), scaled to ``rms`` per NOCS axis (as the tuning variant's field per channel): a
-    smooth distortion that persists across a sequence."""
+    smooth distortion that persists across a sequence. Linearised: each point moves
+    perpendicular to its position, so it also moves outward at second order."""
     out = nocs.copy()
     for iid in np.unique(mask[mask > 0]):
         m = mask == iid
