@@ -31,6 +31,7 @@ from fcop_ros.core import PAPER_FCOP_IS
 from fcop_ros.core.camera import image_centre
 from fcop_ros.core.stabbing import focal_intervals
 from fcop_ros.synthetic.world import WORLD_PRESETS, ZERO_MEAN_FAMILIES, world_frame, world_frames
+from fcop_ros.tools.cli import HelpFormatter
 # bench/peers.py: the script's own folder is on the path when run as a script
 from peers import p4pf
 
@@ -206,7 +207,7 @@ def window(presets, sequences, first_seed, variant):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                 formatter_class=HelpFormatter)
     ap.add_argument(
         "--frames", type=int, default=60, help="frames per preset for single-frame figures"
     )

@@ -17,6 +17,7 @@ import numpy as np
 from fcop_ros import estimate_focal
 from fcop_ros.core import PAPER_FCOP_IS
 from fcop_ros.synthetic.world import BASE_PRESETS, world_frame
+from fcop_ros.tools.cli import HelpFormatter
 
 TARGETS = {"sensor": 3.15, "predicted": 6.87}
 
@@ -32,7 +33,7 @@ def literal_error(fam, frames: int, first_seed: int = 1000) -> np.ndarray:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                 formatter_class=HelpFormatter)
     ap.add_argument("--frames", type=int, default=80, help="frames per preset and gain")
     ap.add_argument("--gains", type=float, nargs="+", default=[0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
     ap.add_argument("--presets", nargs="+", default=list(TARGETS))
