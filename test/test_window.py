@@ -82,7 +82,6 @@ def test_weights_by_uncertainty():
     assert r.focal == pytest.approx(600.0 * np.exp(np.log(700 / 600) / 101), rel=1e-9)
 
 
-
 def test_a_budget_that_does_not_vary_weighs_no_frame():
     """Frames that share one systematic error, each with its own noise (0.2-3%) and its own
     stated budget (0.5-5%, unrelated to its error): the frames' spread shows the budgets do not

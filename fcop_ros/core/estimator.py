@@ -387,7 +387,7 @@ def estimate_focal(
     # The objects' prior spread stands for the depth network's errors of each object's relief,
     # which move f by the fits' lean on depth: about one for one with noisy NOCS, almost nothing
     # when exact NOCS let the pixels fix f.
-    lean = relief_lean[good][np.isfinite(relief_lean[good])]
+    lean = relief_lean[good & np.isfinite(relief_lean)]
     tau0 = opt.object_tau * (float(np.sqrt(np.mean(lean**2))) if lean.size else 1.0)
     comb = random_effects(np.log(fits.focal[good]), var[good], tau0, opt.object_tau_weight)
     if comb is None:

@@ -301,7 +301,8 @@ def _twist(nocs, mask, state, rng, rms):
         axis = state.fields.get(("twist", int(iid)))
         if axis is None:
             axis = rng.normal(size=3)
-            axis = state.fields.setdefault(("twist", int(iid)), axis / np.linalg.norm(axis))
+            axis /= np.linalg.norm(axis)
+            state.fields[("twist", int(iid))] = axis
         q = nocs[m] - 0.5
         move = np.cross(axis, q) * (q @ axis)[:, None]
         out[m] = nocs[m] + rms * move / max(np.sqrt(np.mean(move ** 2)), 1e-9)
@@ -323,10 +324,7 @@ def _mask_errors(mask, nocs, px, rng, variant):
             dx, dy = (int(v) for v in rng.integers(-px, px + 1, 2))
             m = cv2.warpAffine(m, np.float32([[1, 0, dx], [0, 1, dy]]), m.shape[::-1],
                                flags=cv2.INTER_NEAREST)
-            r = 0
-        else:
-            r = int(rng.integers(-px, px + 1))
-        if r:
+        elif r := int(rng.integers(-px, px + 1)):
             kern = cv2.getStructuringElement(shape, (2 * abs(r) + 1,) * 2)
             m = cv2.dilate(m, kern) if r > 0 else cv2.erode(m, kern)
         m = m.astype(bool)
