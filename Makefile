@@ -33,9 +33,9 @@ bench: $(STAMP)
 	$(PY) bench/bench_core.py
 	$(PY) bench/bench_node.py --frames 10000 --closed-loop-frames 200
 	$(PY) bench/bench_node.py --frames 300 --closed-loop-frames 30 --slow-ms 100
-	$(PY) bench/world_accuracy.py --frames 60 --sequences 8
-	$(PY) bench/world_accuracy.py --frames 60 --sequences 8 --heldout
-	$(PY) bench/world_accuracy.py --frames 60 --sequences 8 --heldout2
+	$(PY) bench/world_accuracy.py --frames 60
+	$(PY) bench/world_accuracy.py --frames 60 --heldout
+	$(PY) bench/world_accuracy.py --frames 60 --heldout2
 	$(PY) bench/world_calibration.py --frames 60
 	$(PY) bench/paper_simulation.py --out docs
 
