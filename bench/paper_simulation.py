@@ -22,6 +22,7 @@ from fcop_ros.core.pose import back_project, rotation_angle_deg, umeyama
 from fcop_ros.core.solver import sample_triplets
 from fcop_ros.core.stabbing import focal_intervals
 from fcop_ros.synthetic import simulate_points, simulate_triplet_batch
+from fcop_ros.tools.cli import HelpFormatter
 
 
 def stability(rng, n=100_000):
@@ -62,7 +63,7 @@ def noisy_error(rng, depth_noise, nocs_noise, trials=500):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
     ap.add_argument("--out", default="docs")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)

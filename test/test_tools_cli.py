@@ -1,4 +1,5 @@
-"""The command-line tools as a user meets them: help text and shown defaults for every option,
+"""The command-line tools as a user meets them: help text and shown defaults for every option
+(none for flags),
 exit codes in --help, fcop_make_bag's progress bar on a terminal, and zstd-compressed bags that
 read back message for message."""
 import argparse
@@ -29,7 +30,10 @@ def test_every_option_has_help_and_shows_its_default(prog):
             continue
         assert action.help and len(action.help) > 8, (prog, action.dest)
         helptext = parser.formatter_class(prog)._get_help_string(action)
-        if action.default is not None and not action.required:
+        flag = isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction))
+        if flag:  # '--no-clock (default: True)' read as 'no clock by default'
+            assert "(default:" not in helptext, (prog, action.dest)
+        elif action.default is not None and not action.required:
             assert "(default: %(default)s)" in helptext, (prog, action.dest)
     assert "exit codes:" in text
 

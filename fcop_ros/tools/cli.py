@@ -5,11 +5,12 @@ import argparse
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
-    """Shows '(default: X)' for every option that has a default (not for required ones or
-    those whose absence the help text explains), and keeps the description and epilog as
-    written."""
+    """Shows '(default: X)' for every option that has a default (not for required ones, flags,
+    whose default is their absence, or those whose absence the help text explains), and keeps
+    the description and epilog as written."""
 
     def _get_help_string(self, action):
-        if action.default is None or action.required:
+        flag = isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction))
+        if action.default is None or action.required or flag:
             return action.help
         return super()._get_help_string(action)
