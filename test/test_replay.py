@@ -117,6 +117,24 @@ def test_zoom_reconverges_in_the_csv(tmp_path):
     assert max(err[18:]) < 4.0           # and on the second, a few frames after the zoom
 
 
+def test_a_first_compile_longer_than_the_timeout_is_waited_for(tmp_path, monkeypatch, capsys):
+    """A cold first run compiles the kernels for a minute or more on a busy core; the replay's
+    per-frame timeout must not count it (make demo failed on a fresh single-core machine)."""
+    from fcop_ros.core import compiled
+
+    real = compiled.warm_up
+
+    def slow_compile():
+        time.sleep(3.0)  # stands in for numba compiling the kernels
+        return real()
+
+    monkeypatch.setattr(compiled, "warm_up", slow_compile)
+    bag = tiny_bag(tmp_path / "in", frames=3)
+    s = run(bag, tmp_path / "out", timeout=1.0)
+    assert s.frames_read == 3 and s.frames_estimated == 3
+    assert "compiling its estimator's kernels" in capsys.readouterr().err
+
+
 def test_cli_errors(tmp_path, capsys):
     bag = tiny_bag(tmp_path / "in", frames=2)
     base = ["--nocs-topic", mb.TOPICS["nocs"], "--mask-topic", mb.TOPICS["mask"], "--out",

@@ -558,6 +558,12 @@ class FcopNode(Node):
         return self.worker.idle()
 
     @property
+    def warming_up(self) -> bool:
+        """True while the worker prepares the estimator's kernels, before its first frame (a
+        first run on a machine compiles them: a minute or more on a busy core)."""
+        return self._warming_up
+
+    @property
     def processed(self) -> int:
         """Frames the estimator finished (failed ones included)."""
         return self.worker.processed

@@ -126,6 +126,7 @@ def replay(
         "writer": None,
         "bar": None,
         "bag_failed": False,
+        "said_warming": False,
     }
 
     ctx = Context()
@@ -174,8 +175,15 @@ def replay(
         executor.add_node(feeder)
 
         def spin_until(cond, limit=timeout):
-            """Spin until ``cond()`` holds; after ``limit`` s a ReplayError with the counts."""
-            if not spin(executor, cond, limit, step=0.01):
+            """Spin until ``cond()`` holds; after ``limit`` s a ReplayError with the counts. Time
+            the node spends compiling its kernels (a first run on a machine) does not count."""
+            while not spin(executor, cond, limit, step=0.01):
+                if node.warming_up:
+                    if not state["said_warming"]:
+                        state["said_warming"] = True
+                        print("fcop_replay: the node is compiling its estimator's kernels (the "
+                              "first run on this machine); waiting for it", file=sys.stderr)
+                    continue
                 n = node.counts
                 raise ReplayError(
                     "the node did not answer in time (is the machine overloaded?) "
