@@ -130,6 +130,32 @@ def test_no_restart_on_static_sequences_with_outlier_frames():
     assert w.changes == 0
 
 
+def test_two_wild_frames_among_four_newer_ones_are_no_step():
+    """Sensor-like frames (0.1%) with two wrong frames (-20%, std_rel 3-4%) among the four
+    newest: the midpoint of an even segment's two middle frames moved 10%, most frames did not
+    (seed 5034 of the tuning sensor sequences restarted twice on this)."""
+    rng = np.random.default_rng(5)
+    w = FocalWindow(WindowOptions(max_frames=30))
+    for k, e in enumerate(frames(rng, 12, sigma=0.001)):
+        w.add(e, k / 30)
+    for k, (f, s) in enumerate([(480.0, 0.04), (600.0, 0.002), (600.5, 0.002), (470.0, 0.03)]):
+        w.add(estimate(f, s, std_rel_noise=s), 1 + k / 30)
+    assert w.changes == 0
+
+
+def test_frames_that_err_as_much_as_they_say_are_no_step():
+    """Three frames at +14% that say std_rel 10% after tight frames (0.5%) are 1.4 of their own
+    standard errors from the rest, not a zoom (tuning sensor sequences 5031 and 5033 restarted
+    on such frames, judged by the frames' spread alone)."""
+    rng = np.random.default_rng(6)
+    w = FocalWindow(WindowOptions(max_frames=30))
+    for k, e in enumerate(frames(rng, 15, sigma=0.005)):
+        w.add(e, k / 30)
+    for k, f in enumerate([684.0, 690.0, 681.0]):
+        w.add(estimate(f, 0.10, std_rel_noise=0.10), 1 + k / 30)
+    assert w.changes == 0
+
+
 def test_image_size_change_starts_a_new_window():
     w = FocalWindow()
     for k in range(10):

@@ -26,11 +26,12 @@ Frames further than ``reject_sigma`` robust standard deviations of the frames' o
 least their noise) from the median are left out: a frame whose objects were all wrong.
 
 A zoom is a change point: at the likeliest split of the window into older and newer frames (at
-least ``change_frames`` on each side), the difference of the two medians is compared with its
-standard error from the frames' spread about the two medians, widened for slow drift (persistent
-error cancels in the difference). When it exceeds both ``change_sigma`` standard errors and
-``change_threshold`` (relative), the older frames are dropped. A change of image size starts a
-new window. The settings are a :class:`WindowOptions`.
+least ``change_frames`` on each side), the difference of the two medians (of an even segment,
+its middle frame nearer the other segment) is compared with its standard error from the frames'
+spread about the two medians, widened for slow drift (persistent error cancels in the
+difference), or from the frames' own ``std_rel`` where that is larger. When it exceeds both
+``change_sigma`` standard errors and ``change_threshold`` (relative), the older frames are
+dropped. A change of image size starts a new window. The settings are a :class:`WindowOptions`.
 """
 
 from __future__ import annotations
@@ -139,17 +140,21 @@ class FocalWindow:
 
     def _detect_change(self) -> bool:
         """True (and the older frames dropped) when the newer frames moved away from the older."""
-        rated, y, _, _ = self._rated()
+        rated, y, v, _ = self._rated()
         k = self.options.change_frames
         n = y.size
         if n < 2 * k:
             return False
         # Medians of the older and newer frames for every split (a lone wild frame moves
-        # neither); the most likely split is the one whose difference stands out most.
+        # neither); the most likely split is the one whose difference stands out most. An even
+        # segment's median is taken as whichever middle frame lies nearer the other segment:
+        # a step needs most of a segment's frames, not two wild ones among four.
         cut = np.arange(k, n - k + 1)  # the first newer frame
-        old = np.array([np.median(y[:c]) for c in cut])
-        new = np.array([np.median(y[c:]) for c in cut])
-        diff = new - old
+        old = np.array([_middle(y[:c]) for c in cut])
+        new = np.array([_middle(y[c:]) for c in cut])
+        gap = np.maximum(new[:, 0] - old[:, 1], old[:, 0] - new[:, 1])
+        diff = np.where(gap > 0, np.where(new[:, 0] > old[:, 1], gap, -gap), 0.0)
+        old, new = old.mean(1), new.mean(1)
         best = int(np.argmax(np.abs(diff) * np.sqrt(cut * (n - cut))))
         c = int(cut[best])
         # The frames' transient spread about the two segments' medians (a step must not count as
@@ -165,7 +170,10 @@ class FocalWindow:
         )
         rho = _lag_one(r) if n > 3 else 0.0
         t *= (1.0 + rho) / (1.0 - rho)
-        z = abs(diff[best]) / np.sqrt(np.pi / 2 * (t / c + t / (n - c)))
+        # Judged against the frames' own uncertainty too: a few frames that err as much as
+        # they say they may are no step.
+        t_old, t_new = max(t, float(np.median(v[:c]))), max(t, float(np.median(v[c:])))
+        z = abs(diff[best]) / np.sqrt(np.pi / 2 * (t_old / c + t_new / (n - c)))
         if not (
             z > self.options.change_sigma
             and abs(diff[best]) > np.log1p(self.options.change_threshold)
@@ -230,6 +238,12 @@ class FocalWindow:
         n_eff = max(n * (1.0 - rho) / (1.0 + rho), 1.0)
         varies = max(spread2 * max(1.0 - np.sqrt(2.0 / n_eff), 0.0) - noise_var, 0.0)
         return varies, max(budget - varies, 0.0) + max(spread2, noise_var) / n_eff
+
+
+def _middle(y: np.ndarray) -> tuple[float, float]:
+    """The lower and upper medians of y (equal for an odd count)."""
+    s = np.sort(y)
+    return float(s[(y.size - 1) // 2]), float(s[y.size // 2])
 
 
 def _lag_one(r: np.ndarray) -> float:
