@@ -155,6 +155,33 @@ def check_focal_max(h):
     assert f is None or f <= 500.0
 
 
+@pytest.mark.parametrize("change", [dict(focal_min=400.0, focal_max=2000.0),
+                                    dict(focal_max=250.0)])
+def test_focal_range_set_at_run_time_bounds_every_published_focal(harness, change):
+    """focal_range bounds every published focal: the window's focal of before a run-time change
+    that puts it outside the new range is held back at once, and diagnostics say why."""
+    h = harness(parameter_overrides=[Parameter("diagnostics_period", value=60.0)])
+
+    def small(k):
+        return clean_frame(k, 320, 240, 300.0)
+    frames_then(h, 3, frame=small)
+    assert abs(h.node.window.current.focal / 300.0 - 1) < 1e-3 and h.node.latest is not None
+    published = h.node.camera_info_published
+    set_ok(h, **change)
+    st = h.node.diagnostic_status()
+    assert st.level == DiagnosticStatus.WARN and "outside focal_range" in st.message, st.message
+    frames_then(h, 2, first=3, frame=small)  # each depth image is answered in its callback
+    assert h.node.camera_info_published == published
+    assert abs(h.node.window.current.focal / 300.0 - 1) < 1e-3  # still in the window, held back
+    st = h.node.diagnostic_status()
+    assert st.level == DiagnosticStatus.WARN and "outside focal_range" in st.message, st.message
+    res = h.node._on_save_calibration(Trigger.Request(), Trigger.Response())
+    assert not res.success and "outside focal_range" in res.message, res.message
+    set_ok(h, focal_min=50.0, focal_max=20000.0)  # back: the window's focal is published again
+    frames_then(h, 1, first=5, frame=small)
+    assert h.node.camera_info_published == published + 1
+    assert h.node.diagnostic_status().level == DiagnosticStatus.OK
+
 def check_min_object_pixels(h):
     frames_then(h, 1)
     set_ok(h, min_object_pixels=10_000_000)

@@ -262,6 +262,12 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "held back: std_rel 0.2000 above max_uncertainty 0.05",
         ),
         (
+            {"publishable": False, "focal_range": (700.0, 2000.0)},
+            QUIET,
+            DiagnosticStatus.WARN,
+            "focal 600.0 px held back: outside focal_range [700, 2000]",
+        ),
+        (
             {},
             Rates(5.0, 150, 40, 110),
             DiagnosticStatus.WARN,

@@ -24,7 +24,8 @@ class DiagnosticsInput:
     seconds the estimator has been busy with one frame / since it finished the last (None: idle /
     never); ``processing_ms``: recent per-frame estimation times; ``kernels``: what runs the
     estimator's kernels (numba or the numpy fallback); ``warming_up``: the estimator thread is
-    still compiling or loading them."""
+    still compiling or loading them; ``focal_range``: (focal_min, focal_max), which bounds every
+    published focal."""
 
     now: float
     window: object
@@ -44,6 +45,7 @@ class DiagnosticsInput:
     warnings: dict = field(default_factory=dict)
     kernels: str = ""
     warming_up: bool = False
+    focal_range: tuple = (0.0, float("inf"))
 
 
 @dataclass(frozen=True)
@@ -83,8 +85,8 @@ class RateWindow:
 def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     """(level, message, {key: value}) of the node's status: ERROR when the estimator is stalled,
     WARN without a focal (saying so while the kernels are being prepared), with one held back by
-    max_uncertainty, or when the estimator skipped more frames than it estimated lately; else
-    OK."""
+    focal_range (changed at run time) or max_uncertainty, or when the estimator skipped more
+    frames than it estimated lately; else OK."""
     win = d.window
     std = getattr(win, "std_rel", None)
     if d.busy_for is not None and d.busy_for > d.max_estimate_age:
@@ -99,6 +101,12 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
                    "on a machine compiles them, up to a minute)")
     elif win.focal is None:
         level, message = WARN, f"no focal estimate yet: {win.reason}"
+    elif not d.focal_range[0] <= win.focal <= d.focal_range[1]:
+        level = WARN
+        message = (
+            f"focal {win.focal:.1f} px held back: outside focal_range "
+            f"[{d.focal_range[0]:g}, {d.focal_range[1]:g}]"
+        )
     elif not d.publishable:
         level = WARN
         message = (

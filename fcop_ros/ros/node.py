@@ -296,7 +296,8 @@ class FcopNode(Node):
                 self.estimator_options = estimator_options(new)
             if changed & WINDOW_PARAMETERS:
                 self._build_window(keep=True)
-            elif changed & {"max_uncertainty"}:
+            elif changed & {"max_uncertainty", "focal_min", "focal_max"}:
+                # The publish gate again: the window's focal may now be held back (or freed).
                 self._update_estimate_locked(self.window.current)
         if "diagnostics_period" in changed:
             self.destroy_timer(self._diag_timer)
@@ -326,12 +327,20 @@ class FcopNode(Node):
             self._history.popleft()
         return win
 
+    def _in_focal_range(self, focal: float) -> bool:
+        """focal_range bounds every published focal, also one the window holds from frames
+        estimated before the range was changed at run time."""
+        return self.p["focal_min"] <= focal <= self.p["focal_max"]
+
     def _update_estimate_locked(self, win) -> None:
+        """The publish gate: the window's focal goes out only within max_uncertainty and
+        focal_range."""
         std = getattr(win, "std_rel", None)
         if (
             win.focal is None
             or std is None
             or std > self.p["max_uncertainty"]
+            or not self._in_focal_range(win.focal)
             or self._size is None
         ):
             self._estimate = None
@@ -743,6 +752,11 @@ class FcopNode(Node):
             response.message = f"no focal estimate yet: {win.reason}"
         elif std is None:
             response.message = "the focal estimate has no uncertainty yet"
+        elif est is None and not p["focal_min"] <= win.focal <= p["focal_max"]:
+            response.message = (
+                f"focal {win.focal:.1f} px is outside focal_range "
+                f"[{p['focal_min']:g}, {p['focal_max']:g}]"
+            )
         elif est is None:
             response.message = f"std_rel {std:.4f} is above max_uncertainty {p['max_uncertainty']}"
         if est is None:
@@ -798,6 +812,7 @@ class FcopNode(Node):
                 publishable=self._estimate is not None,
                 window_fill=f"{len(self.window)}/{self.p['window_frames']}",
                 max_uncertainty=self.p["max_uncertainty"],
+                focal_range=(self.p["focal_min"], self.p["focal_max"]),
                 max_estimate_age=self.p["max_estimate_age"],
                 matched=self.sync.stats.matched,
                 processed=work.processed,
