@@ -464,3 +464,30 @@ def test_image_size_change_starts_a_new_window(harness, capfd):
     last = h.info.msgs[-1]
     assert stamp_ns(last) == T0 + 2 * DT and (last.width, last.height) == (320, 240)
     assert abs(last.k[0] / 300.0 - 1) < 1e-3 and last.k[2] == 159.5
+
+
+def test_a_stray_frame_of_another_size_without_evidence_keeps_the_window(harness, capfd):
+    """A frame of another size that gives no focal is a counted drop: the window and the
+    CameraInfo of the following frames of the window's size stay as they were."""
+    from msg_adapters import depth_to_image, mask_to_image, nocs_to_image
+    h = harness()
+    for k in range(3):
+        assert h.frame(frame_messages(clean_frame(k, 320, 240, 300.0), T0 + k * DT))
+    assert spin_until(h.ex, lambda: len(h.info) == 3, 10)
+    hdr = header_from_ns(T0 + 3 * DT, "camera_optical_frame")
+    stray = (depth_to_image(np.full((16, 16), np.nan, np.float32), "32FC1", hdr),
+             nocs_to_image(np.zeros((16, 16, 3), np.float32), "32FC3", hdr),
+             mask_to_image(np.zeros((16, 16), np.uint8), "mono8", hdr))
+    assert h.frame(stray)
+    assert h.node.rejected["other_size_no_evidence"] == 1 and len(h.node.window) == 3
+    assert abs(h.node.window.current.focal / 300.0 - 1) < 1e-3
+    assert h.node.diagnostic_status().level == DiagnosticStatus.OK
+    for k in range(4, 6):
+        assert h.frame(frame_messages(clean_frame(k, 320, 240, 300.0), T0 + k * DT))
+    assert spin_until(h.ex, lambda: len(h.info) == 5, 10)
+    assert [stamp_ns(m) for m in h.info.msgs[3:]] == [T0 + 4 * DT, T0 + 5 * DT]
+    assert all((m.width, m.height) == (320, 240) and abs(m.k[0] / 300.0 - 1) < 1e-3
+               for m in h.info.msgs)
+    assert len(h.node.window) == 5
+    err = capfd.readouterr().err
+    assert "image size changed" not in err and "16x16 frame without focal evidence" in err

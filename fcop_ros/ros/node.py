@@ -644,11 +644,6 @@ class FcopNode(Node):
             poses=False,
             seed=int(self._rng.integers(2**31)),
         )
-        if est.focal is None:
-            self._reject("no_evidence")
-            self._throttle.warn(
-                "no_evidence", f"fcop_node: frame without focal evidence: {est.reason}"
-            )
         if est.mirrored:
             with self._lock:
                 self.rejected["mirrored_nocs"] += len(est.mirrored)
@@ -659,20 +654,38 @@ class FcopNode(Node):
                 "(rgb8 vs bgr8), or its axis convention (parameter nocs_convention)? "
                 "The focal length is unaffected; no pose is published for them",
             )
-        resized = None
+        resized = stray = None
         with self._lock:
             if generation is not None and generation != self.worker.generation:
                 return False  # taken before a reset
             if self._size != (w, h):
-                resized, self._size = self._size, (w, h)
-                if resized is not None:
-                    self.window.reset()
-                    self._history.clear()
-            win = self._add_to_window(_light(est), stamp * 1e-9)
-            self._update_estimate_locked(win)
-            ready = self._estimate
+                if est.focal is None and self._size is not None:
+                    # Another size without evidence: a drop; only evidence starts a new window.
+                    stray = self._size
+                else:
+                    resized, self._size = self._size, (w, h)
+                    if resized is not None:
+                        self.window.reset()
+                        self._history.clear()
+            if stray is None:
+                win = self._add_to_window(_light(est), stamp * 1e-9)
+                self._update_estimate_locked(win)
+                ready = self._estimate
             self.last_estimate = est
             self._proc_times.append(time.perf_counter() - t0)
+        if stray is not None:
+            self._reject("other_size_no_evidence")
+            self._throttle.warn(
+                "other_size_no_evidence",
+                f"fcop_node: dropped a {w}x{h} frame without focal evidence ({est.reason}); "
+                f"the window keeps its {stray[0]}x{stray[1]} frames",
+            )
+            return False
+        if est.focal is None:
+            self._reject("no_evidence")
+            self._throttle.warn(
+                "no_evidence", f"fcop_node: frame without focal evidence: {est.reason}"
+            )
         if resized is not None:
             self.get_logger().info(
                 f"fcop_node: image size changed from {resized[0]}x{resized[1]} to {w}x{h}: "
