@@ -34,6 +34,13 @@ def values(status):
     ("window_frames:=abc", ["window_frames='abc'", "an integer in [1, 1000]"]),
     ("sync_mode:=fuzzy", ["sync_mode='fuzzy'", "one of exact, approximate"]),
     ("principal_point_x:=-5.0", ["principal_point_x=-5.0", "[-1.0, 1000000.0]"]),
+    # QoS overrides: rclpy declares them when the node creates its topics.
+    ("qos_overrides./depth.subscription.depth:=abc",
+     ["qos_overrides./depth.subscription.depth='abc'", "an integer"]),
+    ("qos_overrides./depth.subscription.reliability:=sometimes",
+     ["qos_overrides./depth.subscription.reliability='sometimes'", "reliable, best_effort"]),
+    ("qos_overrides./camera_info.publisher.durability:=7",
+     ["qos_overrides./camera_info.publisher.durability=7", "transient_local"]),
 ])
 def test_bad_parameter_at_start_up_is_one_line_and_exit_2(arg, expected):
     exe = os.path.join(BIN, "fcop_node")
@@ -43,6 +50,17 @@ def test_bad_parameter_at_start_up_is_one_line_and_exit_2(arg, expected):
     assert res.returncode == 2, res.stderr
     assert "Traceback" not in res.stderr and len(lines) == 1, res.stderr
     assert all(e in lines[0] for e in expected), lines[0]
+
+
+def test_unreadable_params_file_at_start_up_is_one_line_and_exit_2(tmp_path):
+    exe = os.path.join(BIN, "fcop_node")
+    missing = str(tmp_path / "nonexistent.yaml")
+    res = subprocess.run([exe, "--ros-args", "--params-file", missing], capture_output=True,
+                         text=True, timeout=60)
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert res.returncode == 2, res.stderr
+    assert "Traceback" not in res.stderr and len(lines) == 1, res.stderr
+    assert missing in lines[0] and "params file" in lines[0], lines[0]
 
 
 @pytest.mark.parametrize("overrides, expected", [
@@ -63,6 +81,25 @@ def test_bad_parameter_in_process_raises_parameter_error(overrides, expected):
             )
         assert str(err.value).startswith(expected)
 
+
+def test_valid_qos_overrides_are_applied(harness):
+    h = harness(node_args=["--ros-args", "-p", "qos_overrides./camera_info.publisher.depth:=3",
+                           "-p", "qos_overrides./camera_info.publisher.history:=KEEP_LAST",
+                           "-p", "qos_overrides./nocs.subscription.depth:=2"])
+    assert h.node.pub_info.qos_profile.depth == 3 and h.node._subs[1].qos_profile.depth == 2
+
+
+def test_bad_qos_override_in_process_raises_parameter_error():
+    from fcop_ros.ros.node import FcopNode
+    from fcop_ros.ros.params import ParameterError
+    from ros_helpers import ros_context
+    args = ["--ros-args", "-p", "qos_overrides./mask.subscription.history:=forever"]
+    with ros_context() as (ctx, ex):
+        with pytest.raises(ParameterError) as err:
+            FcopNode(context=ctx, cli_args=args)
+        assert str(err.value).startswith(
+            "parameter qos_overrides./mask.subscription.history='forever' is not allowed: one of"
+        )
 
 def test_integer_for_a_float_parameter_is_taken(harness):
     # `-p focal_min:=300` is what people type; rclpy alone refuses an INTEGER for a DOUBLE.

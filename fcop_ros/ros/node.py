@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import sys
 import threading
 import time
@@ -21,21 +22,24 @@ from dataclasses import dataclass
 
 import numpy as np
 import rclpy
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import ParameterException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
     DurabilityPolicy,
     HistoryPolicy,
+    LivelinessPolicy,
     QoSProfile,
     ReliabilityPolicy,
     qos_profile_sensor_data,
 )
-from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.qos_overriding_options import InvalidQosOverridesError, QoSOverridingOptions
 from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
@@ -76,6 +80,36 @@ from .throttle import LogThrottle
 from .worker import LatestSlotWorker
 
 INPUTS = ("depth", "nocs", "mask")
+RCLError = _rclpy.RCLError
+# The words a QoS override of each policy takes (rclpy compares them in upper case).
+_QOS_WORDS = {
+    name: tuple(m.lower() for m in policy.__members__ if m != "UNKNOWN")
+    for name, policy in (
+        ("reliability", ReliabilityPolicy),
+        ("history", HistoryPolicy),
+        ("durability", DurabilityPolicy),
+        ("liveliness", LivelinessPolicy),
+    )
+}
+_QOS_INTEGERS = {
+    "depth": "an integer >= 0",
+    "deadline": "an integer >= 0 (nanoseconds)",
+    "lifespan": "an integer >= 0 (nanoseconds)",
+    "liveliness_lease_duration": "an integer >= 0 (nanoseconds)",
+}
+
+
+def qos_override_problem(policy: str, value) -> str:
+    """What is wrong with ``value`` as the QoS override of ``policy`` ('' if nothing)."""
+    if policy in _QOS_WORDS:
+        ok = isinstance(value, str) and value.lower() in _QOS_WORDS[policy]
+        return "" if ok else "one of " + ", ".join(_QOS_WORDS[policy])
+    if policy in _QOS_INTEGERS:
+        ok = isinstance(value, int) and not isinstance(value, bool) and value >= 0
+        return "" if ok else _QOS_INTEGERS[policy]
+    if policy == "avoid_ros_namespace_conventions":
+        return "" if isinstance(value, bool) else "true or false"
+    return ""
 
 
 @dataclass(frozen=True)
@@ -188,7 +222,59 @@ class FcopNode(Node):
         self.sync = self._new_sync()
         self.estimator_options = estimator_options(self.p)
         self._build_window(keep=False)
+        try:
+            self._create_topics()
+        except ParameterError:
+            Node.destroy_node(self)  # the worker has not started
+            raise
+        self.srv_reset = self.create_service(Trigger, "~/reset", self._on_reset)
+        self.srv_save = self.create_service(
+            Trigger, "~/save_calibration", self._on_save_calibration
+        )
+        self.set_info_client = (
+            self.create_client(SetCameraInfo, self.p["set_camera_info_service"])
+            if self.p["set_camera_info_service"]
+            else None
+        )
+        self._diag_timer = self.create_timer(
+            float(self.p["diagnostics_period"]), self.publish_diagnostics
+        )
+        self.worker.start()
+        self.get_logger().info(
+            f"fcop_node ready: inputs {[s.topic_name for s in self._subs]}, camera_info_in "
+            f"{self.sub_info_in.topic_name}, sync {self.p['sync_mode']}, "
+            f"window {self.p['window_frames']} frames"
+        )
 
+    def _create_topics(self) -> None:
+        """Subscriptions and publishers; a QoS override (a parameter rclpy declares as each is
+        created) the node cannot run with is a ParameterError naming it."""
+        for topic in (*INPUTS, "camera_info_in"):
+            self._check_qos_overrides(topic, "subscription")
+        for topic in ("camera_info", "object_poses", "object_markers"):
+            self._check_qos_overrides(topic, "publisher")
+        try:
+            self._create_topics_unchecked()
+        except (ParameterException, InvalidQosOverridesError) as exc:
+            raise ParameterError(f"QoS override refused: {exc}") from None
+        except RuntimeError as exc:  # rclpy's words for a policy it does not know
+            if "QoS override" not in str(exc):
+                raise
+            raise ParameterError(f"QoS override refused: {exc}") from None
+
+    def _check_qos_overrides(self, topic: str, kind: str) -> None:
+        """ParameterError for a QoS override of this topic's ``kind`` ('subscription' or
+        'publisher') that rclpy would refuse with a traceback."""
+        prefix = f"qos_overrides.{self.resolve_topic_name(topic)}.{kind}."
+        for name, prm in getattr(self, "_parameter_overrides", {}).items():
+            if name.startswith(prefix):
+                problem = qos_override_problem(name[len(prefix):], prm.value)
+                if problem:
+                    raise ParameterError(
+                        f"parameter {name}={prm.value!r} is not allowed: {problem}"
+                    )
+
+    def _create_topics_unchecked(self) -> None:
         qos_in = QoSOverridingOptions.with_default_policies()
         self._subs = [
             self.create_subscription(
@@ -227,24 +313,6 @@ class FcopNode(Node):
         )
         self.pub_latest = self._latched_publisher()
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.srv_reset = self.create_service(Trigger, "~/reset", self._on_reset)
-        self.srv_save = self.create_service(
-            Trigger, "~/save_calibration", self._on_save_calibration
-        )
-        self.set_info_client = (
-            self.create_client(SetCameraInfo, self.p["set_camera_info_service"])
-            if self.p["set_camera_info_service"]
-            else None
-        )
-        self._diag_timer = self.create_timer(
-            float(self.p["diagnostics_period"]), self.publish_diagnostics
-        )
-        self.worker.start()
-        self.get_logger().info(
-            f"fcop_node ready: inputs {[s.topic_name for s in self._subs]}, camera_info_in "
-            f"{self.sub_info_in.topic_name}, sync {self.p['sync_mode']}, "
-            f"window {self.p['window_frames']} frames"
-        )
 
     # ----- parameters
     def _declare_parameters(self) -> None:
@@ -871,12 +939,44 @@ def _sec(stamp) -> str:
     return "none" if stamp is None else f"{stamp / 1e9:.3f} s"
 
 
+def params_file_problem(args) -> str:
+    """What is wrong with a ``--params-file`` among the ROS arguments ('' if nothing): a file
+    that cannot be read or is not YAML."""
+    in_ros = False
+    for i, arg in enumerate(args):
+        if arg == "--ros-args":
+            in_ros = True
+        elif arg == "--":
+            in_ros = False
+        elif in_ros and arg == "--params-file" and i + 1 < len(args):
+            path = args[i + 1]
+            try:
+                with open(path, encoding="utf-8") as f:
+                    yaml.safe_load(f)
+            except OSError as exc:
+                return f"cannot read params file {path}: {exc.strerror or exc}"
+            except yaml.YAMLError as exc:
+                return f"params file {path} is not YAML: {' '.join(str(exc).split())}"
+    return ""
+
+
 def main(args=None) -> int:
     """Entry point of ``ros2 run fcop_ros fcop_node``: spin until Ctrl-C or external shutdown.
     Exit codes: 0 after a clean shutdown, 2 for a parameter it cannot run with (one line on
     stderr)."""
     limit_allocator_arenas()  # before the node's threads: no step growth over long runs
-    rclpy.init(args=args)
+    problem = params_file_problem(sys.argv if args is None else args)
+    if problem:  # before rcl, which logs a line of its own and raises
+        print(f"fcop_node: {problem}", file=sys.stderr)
+        return 2
+    try:
+        rclpy.init(args=args)
+    except RCLError as exc:  # rcl parses --params-file here: a missing or broken file
+        if "params file" not in str(exc):
+            raise
+        # One line: rcl's words without the source locations it appends.
+        print(f"fcop_node: {re.sub(r', at [^,]+:[0-9]+', '', str(exc))}", file=sys.stderr)
+        return 2
     node = None
     try:
         # The executor exists before the node logs "ready", so an early Ctrl-C finds it whole.
