@@ -182,3 +182,26 @@ class TestBadInput:
     def test_one_pixel_image(self):
         est = estimate_focal(np.ones((1, 1)), np.full((1, 1, 3), 0.5), np.ones((1, 1), np.uint8))
         assert est.focal is None
+
+
+@pytest.mark.parametrize("numba", [True, False])
+def test_votes_all_outside_focal_range_are_named_as_such(numba, monkeypatch):
+    """Votes that exist but all fall outside focal_range say so, not 'degenerate geometry'; the
+    numbers of an estimate are not changed by telling why there is none."""
+    from fcop_ros.core import compiled
+    monkeypatch.setattr(compiled, "ENABLED", numba and compiled.ENABLED)
+    fr = clean_frame(0, 640, 480, 300.0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask,
+                         options=EstimatorOptions(focal_range=(400.0, 2000.0)), seed=3)
+    assert est.focal is None
+    assert est.reason.startswith("all ") and "focal votes outside focal_range [400, 2000]" in \
+        est.reason, est.reason
+    n = int(est.reason.split()[1])
+    assert n > 1000
+    ok = estimate_focal(fr.depth, fr.nocs, fr.mask,
+                        options=EstimatorOptions(focal_range=(50.0, 2000.0)), seed=3)
+    assert abs(ok.focal / 300.0 - 1) < 1e-3 and ok.votes.size == n  # the same triplets
+    # Degenerate geometry is still called so: one NOCS point for every pixel gives no vote.
+    same = np.where(fr.mask[..., None] > 0, 0.5, 0.0) * np.ones(3)
+    est = estimate_focal(fr.depth, same, fr.mask, seed=3)
+    assert est.focal is None and "outside focal_range" not in est.reason, est.reason

@@ -79,6 +79,24 @@ def _votes(instances: list[Instance], opt: EstimatorOptions, rng: np.random.Gene
                         opt.focal_range)
 
 
+def _no_vote_reason(instances, opt: EstimatorOptions, rng, state) -> str:
+    """Why no triplet voted: the same triplets (drawn again from the generator ``state`` they
+    were drawn from, on a copy: nothing else sees it) solved without focal_range tell votes
+    that all fell outside the range from degenerate geometry."""
+    again = np.random.Generator(type(rng.bit_generator)())
+    again.bit_generator.state = state
+    votes, _ = object_votes([inst.x for inst in instances], [inst.d for inst in instances],
+                            [inst.p for inst in instances], int(opt.triplets_per_object), again,
+                            (0.0, np.inf))
+    if votes.size == 0:
+        return "no valid triplet (degenerate geometry)"
+    lo, hi = opt.focal_range
+    return (
+        f"all {votes.size} focal votes outside focal_range [{lo:g}, {hi:g}] "
+        f"(median {np.median(votes):.1f} px)"
+    )
+
+
 def _nocs_spread(p: np.ndarray):
     """RMS distance of NOCS points p (N,3) from their mean: sqrt(mean(sum((p - mean)^2, axis=1))),
     written per column (the same bits; numpy reduces an axis of 3 slowly) or compiled."""
@@ -307,12 +325,14 @@ def estimate_focal(
             poses,
         )
 
+    drawn_from = rng.bit_generator.state  # to tell why, should no vote come out
     votes, owner = _votes(instances, opt, rng)
     ids = [inst.instance_id for inst in instances]
     per_obj = dict(zip(ids, np.bincount(owner, minlength=len(ids)).tolist()))
     if votes.size == 0:
         return FocalEstimate(
-            None, votes_per_object=per_obj, reason="no valid triplet (degenerate geometry)", **base
+            None, votes_per_object=per_obj, reason=_no_vote_reason(instances, opt, rng,
+                                                                   drawn_from), **base
         )
     if opt.noise_bound.equal_widths:  # one width in log f: one sort of the centres
         st, back = stab_equal_width(np.log(votes), opt.noise_bound.log_half_width), np.exp
