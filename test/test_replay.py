@@ -340,9 +340,61 @@ def test_play_on_a_truncated_bag_reports_the_damage(tmp_path, capsys):
     f.write_bytes(data[: len(data) // 2])
     code = rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic",
                     mb.TOPICS["nocs"], "--mask-topic", mb.TOPICS["mask"], "--play",
-                    "--rate", "50"])
+                    "--rate", "50", "--wait-subscribers", "0.1"])
     out, err = capsys.readouterr()
+    assert "fcop_replay: waiting up to 0.1 s for a subscriber on each of " in err
+    assert "fcop_replay: no subscriber on " in err and ": playing anyway" in err
     published = int(out.split()[1])
     assert code == 3 and 3 <= published < 24
     assert f"fcop_replay: bag damaged ({f.name} unreadable after this point" in err
     assert f"played the {published} messages before the damage" in err
+
+
+def test_play_waits_for_a_subscriber_on_each_topic(tmp_path, monkeypatch):
+    """--play spins until each image topic has a subscriber before its first message: a listener
+    that subscribes only once the player is ready to play (a node still starting) gets every
+    frame. (Without the wait the player reads its first message and publishes it at once.)"""
+    bag = tiny_bag(tmp_path / "in", frames=6, rate=10.0)
+    topics = [mb.TOPICS["depth"], mb.TOPICS["nocs"], mb.TOPICS["mask"]]
+    read = []
+    real = replay_play._readable
+
+    def counted(source, topics_):
+        for item in real(source, topics_):
+            read.append(item[0])
+            yield item
+    monkeypatch.setattr(replay_play, "_readable", counted)
+    with ros_context() as (ctx, ex):
+        late = Node("late_listener", context=ctx)
+        ex.add_node(late)
+        lines, result = [], {}
+        th = threading.Thread(target=lambda: result.setdefault("r", replay_play.play(
+            bag, topics, rate=2.0, context=ctx, wait_subscribers=30.0, say=lines.append)))
+        th.start()
+        # Ready to play: it says it waits, or (without a wait) it has read its first message.
+        assert spin_until(ex, lambda: lines or read, 20)
+        got = {t: [] for t in topics}
+        for t in topics:
+            late.create_subscription(Image, t, lambda m, t=t: got[t].append(stamp_ns(m)), 50)
+        assert spin_until(ex, lambda: "r" in result and all(len(v) == 6 for v in got.values()),
+                          30), {t: len(v) for t, v in got.items()}
+        th.join(10)
+        assert result["r"].published == 18 and result["r"].no_subscriber == ()
+        assert lines[0] == "waiting up to 30 s for a subscriber on each of " + ", ".join(topics)
+        assert lines[-1].startswith("every topic has a subscriber (after ")
+        late.destroy_node()
+
+
+def test_play_without_subscribers_plays_after_the_wait_and_says_so(tmp_path, capsys):
+    bag = tiny_bag(tmp_path / "in", frames=2)
+    topics = [mb.TOPICS["depth"], mb.TOPICS["nocs"], mb.TOPICS["mask"]]
+    lines = []
+    with ros_context() as (ctx, ex):
+        r = replay_play.play(bag, topics, rate=50.0, context=ctx, wait_subscribers=0.2,
+                             say=lines.append)
+    assert r.published == 6 and r.no_subscriber == tuple(topics)
+    assert lines[-1] == f"no subscriber on {', '.join(topics)} after 0.2 s: playing anyway"
+    code = rp.main([str(bag), "--depth-topic", topics[0], "--nocs-topic", topics[1],
+                    "--mask-topic", topics[2], "--play", "--wait-subscribers", "-1"])
+    err = capsys.readouterr().err
+    assert code == rp.EXIT_INPUT and err.strip() == "fcop_replay: --wait-subscribers must be >= 0"

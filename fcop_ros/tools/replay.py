@@ -116,6 +116,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="play mode: /clock messages per second of wall time between the bag's messages "
         "(one also goes out with every message; 0 = only those)",
     )
+    ap.add_argument(
+        "--wait-subscribers",
+        type=float,
+        default=5.0,
+        metavar="SECONDS",
+        help="play mode: before the first message, wait up to this long until each image topic "
+        "has a subscriber (a live node still being discovered would lose the first frames); "
+        "0 = do not wait",
+    )
     return ap
 
 
@@ -130,6 +139,8 @@ def main(argv=None) -> int:
                 loop=args.loop,
                 clock=args.clock,
                 clock_hz=args.clock_hz,
+                wait_subscribers=args.wait_subscribers,
+                say=lambda line: print(f"fcop_replay: {line}", file=sys.stderr, flush=True),
             )
             print(
                 f"published {res.published} messages"

@@ -19,6 +19,37 @@ class PlayResult:
     published: int = 0
     clock: int = 0
     damaged: str = ""
+    no_subscriber: tuple = ()  # topics still without a subscriber when the wait ended
+
+
+def _wait_for_subscribers(node, pubs: dict, seconds: float, stop, say) -> tuple:
+    """Spin ``node`` until every publisher of ``pubs`` ({topic: publisher}) has a subscriber,
+    ``seconds`` pass or ``stop`` is set; say what it waits for and how it ended. Returns the
+    topics still without a subscriber."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    from ..ros.spin import spin_until
+
+    def missing():
+        return tuple(t for t, pub in pubs.items() if pub.get_subscription_count() == 0)
+
+    if not missing():
+        return ()
+    say(f"waiting up to {seconds:g} s for a subscriber on each of {', '.join(missing())}")
+    start = time.monotonic()
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    try:
+        spin_until(executor, lambda: stop.is_set() or not missing(), seconds)
+    finally:
+        executor.remove_node(node)
+        executor.shutdown(timeout_sec=1.0)
+    left = missing()
+    if left:
+        say(f"no subscriber on {', '.join(left)} after {seconds:g} s: playing anyway")
+    else:
+        say(f"every topic has a subscriber (after {time.monotonic() - start:.2f} s)")
+    return left
 
 
 def _readable(source: BagSource, topics):
@@ -46,6 +77,8 @@ def play(
     qos_depth: int = 10,
     clock: bool = True,
     clock_hz: float = 40.0,
+    wait_subscribers: float = 5.0,
+    say=None,
 ) -> PlayResult:
     """Publish the bag's messages of ``image_topics`` with the recorded timing scaled by ``rate``.
 
@@ -53,7 +86,12 @@ def play(
     --clock` does: the recorded time of every message just before it, and in between at
     ``clock_hz`` (0: only at the messages), so nodes with use_sim_time follow the bag. ``context``
     is an initialised rclpy Context (default: the global one, initialised here); ``stop`` ends
-    playback early. A damaged bag is played up to the damage (``PlayResult.damaged``)."""
+    playback early. A damaged bag is played up to the damage (``PlayResult.damaged``).
+
+    Before the first message it waits, spinning, up to ``wait_subscribers`` seconds (0: not at
+    all) until each image topic has a subscriber, so a live node that is still being discovered
+    does not lose the first frames; ``say`` (a function of one line) is told what it waits for
+    and how the wait ended (``PlayResult.no_subscriber``: the topics still without one)."""
     import rclpy
     from rclpy.node import Node
     from rosgraph_msgs.msg import Clock
@@ -65,6 +103,8 @@ def play(
         raise ReplayError("--rate must be > 0")
     if clock_hz < 0:
         raise ReplayError("--clock-hz must be >= 0")
+    if not wait_subscribers >= 0:
+        raise ReplayError("--wait-subscribers must be >= 0")
     source = BagSource(bag)
     try:
         check_topics(
@@ -106,6 +146,10 @@ def play(
                 tick(min(ts, start_bag + int((time.monotonic() - start_wall) * rate * 1e9)))
 
     try:
+        if wait_subscribers > 0:
+            result.no_subscriber = _wait_for_subscribers(
+                node, pubs, wait_subscribers, stop, say or (lambda line: None)
+            )
         while not stop.is_set():
             start_wall, start_bag = None, None
             last_clock[0] = None  # a loop starts the bag's time over, as rosbag2 does
