@@ -86,15 +86,22 @@ def check_images(depth, nocs, mask):
     if not (depth.shape == nocs.shape[:2] == mask.shape):
         raise ValueError(f"image sizes differ: depth {depth.shape}, nocs {nocs.shape[:2]}, "
                          f"mask {mask.shape}")
-    if not (np.issubdtype(depth.dtype, np.floating) or np.issubdtype(depth.dtype, np.integer)):
+    if not _numeric(depth.dtype):
         raise ValueError(f"depth must be numeric, got dtype {depth.dtype}")
-    if not (np.issubdtype(nocs.dtype, np.floating) or np.issubdtype(nocs.dtype, np.integer)):
+    if not _numeric(nocs.dtype):
         raise ValueError(f"nocs must be numeric, got dtype {nocs.dtype}")
     if mask.dtype == bool:
         mask = mask.astype(np.int32)
-    if not np.issubdtype(mask.dtype, np.integer):
+    if not (mask.dtype.kind in "iu" or np.issubdtype(mask.dtype, np.integer)):
         raise ValueError(f"mask must hold integer instance ids, got dtype {mask.dtype}")
     return depth, nocs, mask
+
+
+def _numeric(dtype) -> bool:
+    """A floating or integer dtype; the common kinds by their letter (np.issubdtype costs a few
+    microseconds per call, and every frame checks three images twice)."""
+    return (dtype.kind in "fiu" or np.issubdtype(dtype, np.floating)
+            or np.issubdtype(dtype, np.integer))
 
 
 def instance_ids(mask: np.ndarray, min_pixels: int = 1):
@@ -182,6 +189,14 @@ def _median(v: np.ndarray) -> float:
         return float(np.partition(v, k)[k])
     part = np.partition(v, (k - 1, k))
     return 0.5 * float(part[k - 1] + part[k])
+
+
+def _mean(v) -> float:
+    """float(np.mean(v)); for a non-empty 1-D float64 array without np.mean's generic overhead
+    (the same value: numpy's pairwise sum divided by the count)."""
+    if isinstance(v, np.ndarray) and v.dtype == np.float64 and v.ndim == 1 and v.size:
+        return float(np.add.reduce(v)) / v.size
+    return float(np.mean(v))
 
 
 def _thin(v: np.ndarray, n: int = 600) -> np.ndarray:
@@ -347,21 +362,22 @@ def _emit_compiled(out, crops, rads, depth, nocs, centre, rng, min_object_pixels
         if status == 0:
             continue
         valid = rr.size
+        if status == 2:  # denoised: the kept pixels' values gathered and their noise in one pass
+            pick = (rng.choice(valid, size=max_pixels, replace=False) if valid > max_pixels
+                    else np.arange(valid))
+            x, d, p, var_d, var_p = _denoised_pick_k(pick, d, p, xu, xv, cn, float(sd ** 2),
+                                                     float(sp ** 2))
+            out.append(Instance(cr.iid, x, d, p, var_d, sd, sp, cr.npix, int(valid), var_p))
+            continue
         if valid > max_pixels:
             pick = rng.choice(valid, size=max_pixels, replace=False)
             # np.take gathers the rows of p several times faster than p[pick].
             rr, cc, d, p = rr[pick], cc[pick], d[pick], np.take(p, pick, axis=0)
-            if status == 2:
-                xu, xv, cn = xu[pick], xv[pick], cn[pick]
-        if status == 1:
-            x = np.column_stack([cc * cr.st + cr.c0 - cx,
-                                 rr * cr.st + cr.r0 - cy]).astype(np.float64)
-            var_d = np.full(rr.size, sd ** 2)
-            var_p = np.full(rr.size, sp ** 2)
-        else:
-            x = np.column_stack([xu, xv])
-            var_d = sd ** 2 / np.maximum(cn, 1.0)
-            var_p = sp ** 2 / np.maximum(cn, 1.0)
+        # Raw values (status 1): the image points are the pixel centres.
+        x = np.column_stack([cc * cr.st + cr.c0 - cx,
+                             rr * cr.st + cr.r0 - cy]).astype(np.float64)
+        var_d = np.full(rr.size, sd ** 2)
+        var_p = np.full(rr.size, sp ** 2)
         out.append(Instance(cr.iid, x, d, p, var_d, sd, sp, cr.npix, int(valid), var_p))
 
 
@@ -559,12 +575,15 @@ def calibrated_nocs(inst: Instance) -> Instance:
     shrink the fitted similarity along the object's thin axes, like a shape error."""
     if inst.var_p is None or len(inst.p) < 4:
         return inst
-    noise = float(np.mean(inst.var_p))
+    noise = _mean(inst.var_p)
     if not noise > 0:
         return inst
     if compiled.ENABLED:
-        return replace(inst, p=_calibrated_nocs_k(np.ascontiguousarray(inst.p, np.float64),
-                                                  noise))
+        p = _calibrated_nocs_k(np.ascontiguousarray(inst.p, np.float64), noise)
+        if type(inst) is Instance:  # dataclasses.replace, without its generic field walk
+            return Instance(inst.instance_id, inst.x, inst.d, p, inst.var_d, inst.sigma_d,
+                            inst.sigma_p, inst.mask_pixels, inst.valid_pixels, inst.var_p)
+        return replace(inst, p=p)
     centre = inst.p.mean(0)
     q = inst.p - centre
     cov = q.T @ q / len(q)
@@ -923,6 +942,25 @@ def _crop_kernel(depth, nocs, inst, r0, c0, st, rad, cx, cy, min_px, denoise_rad
         xv[k] = _box_mean_k(S, 5, i, j) / d[k]
         cn[k] = np.float32(S[0, i, j])
     return 2, rr, cc, d, p, xu, xv, cn, sd, sp
+
+
+@kernel
+def _denoised_pick_k(pick, d, p, xu, xv, cn, var_d_px, var_p_px):
+    """The rows ``pick`` of a denoised crop's output as an instance's arrays: (x, d, p, var_d,
+    var_p), x = (xu, xv) and each variance the pixel's noise over its box count (at least 1),
+    as _emit_compiled's numpy steps gave them, in one pass instead of seven gathers."""
+    m = pick.size
+    x = np.empty((m, 2))
+    d_out, p_out, var_d, var_p = np.empty(m), np.empty((m, 3)), np.empty(m), np.empty(m)
+    for k in range(m):
+        i = pick[k]
+        x[k, 0], x[k, 1] = xu[i], xv[i]
+        d_out[k] = d[i]
+        p_out[k, 0], p_out[k, 1], p_out[k, 2] = p[i, 0], p[i, 1], p[i, 2]
+        c = cn[i] if cn[i] > 1.0 else 1.0
+        var_d[k] = var_d_px / c
+        var_p[k] = var_p_px / c
+    return x, d_out, p_out, var_d, var_p
 
 
 @kernel

@@ -19,6 +19,7 @@ import numpy as np
 
 from . import compiled
 from .compiled import kernel
+from .correspondences import _mean
 from .object_fit import _CAUCHY, ObjectFits, _lu_factor, _lu_solve
 
 #: The depth-error patterns, in the order of :func:`depth_influence`'s columns.
@@ -245,9 +246,9 @@ def object_variances(support, fits: ObjectFits, good, spread, raw_spread, relief
     var = fits.var_log_focal + (unseen * relief_lean) ** 2
     # Noise shares of the 3D points' and the NOCS' variance, which lower the fit's quality even
     # for a perfect shape.
-    noise_y = np.array([np.mean(i.var_d) for i in support]) / np.maximum(
+    noise_y = np.array([_mean(i.var_d) for i in support]) / np.maximum(
         fits.scale**2 * spread**2, 1e-300)
-    noise_p = np.array([0.0 if s.var_p is None else 3.0 * np.mean(s.var_p) for s in support])
+    noise_p = np.array([0.0 if s.var_p is None else 3.0 * _mean(s.var_p) for s in support])
     noise_p = noise_p / np.maximum(raw_spread**2, 1e-300)
     kept = (1.0 - np.minimum(noise_y, 0.9)) * (1.0 - np.minimum(noise_p, 0.9))
     quality = np.minimum(fits.quality / kept, 1.0)

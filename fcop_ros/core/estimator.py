@@ -28,6 +28,10 @@ from .options import EstimatorOptions
 from .stabbing import interval_stabbing, stab_equal_width
 
 
+#: The options of a call without any (frozen, so one instance serves every frame).
+_DEFAULT_OPTIONS = EstimatorOptions()
+
+
 @dataclass
 class FocalEstimate:
     """Result of :func:`estimate_focal`.
@@ -281,7 +285,7 @@ def estimate_focal(
     Returns a :class:`FocalEstimate`; ``focal`` is None when there is no evidence, never a
     made-up number. Mismatched or malformed images raise ValueError.
     """
-    opt = EstimatorOptions() if options is None else options
+    opt = _DEFAULT_OPTIONS if options is None else options
     if not isinstance(opt, EstimatorOptions) or isinstance(principal_point, EstimatorOptions):
         raise TypeError("estimate_focal takes its settings as options=EstimatorOptions(...)")
     depth, nocs, mask = check_images(depth, nocs, mask)
