@@ -120,3 +120,24 @@ def test_singular_system(monkeypatch):
     # The flat object's own fit is ill-posed too (one image point does not fix f).
     _assert_same(fast, slow, instances, ill_posed=[1])
     assert np.isinf(slow.var_log_focal).all() and np.isinf(fast.var_log_focal).all()
+
+
+def test_padding_both_ways(monkeypatch):
+    """_pad's compiled row gather gives the numpy path's arrays and draws, and instances of other
+    types or layouts (float32, non-contiguous) take the numpy path alongside."""
+    from fcop_ros.core.object_fit import _pad
+
+    insts, _ = _instances("predicted", FIRST_SEED)
+    a, b = insts[0], insts[-1]
+    odd = [Instance(a.instance_id, a.x.astype(np.float32), a.d, a.p, a.var_d, a.sigma_d,
+                    a.sigma_p, a.mask_pixels, a.valid_pixels, a.var_p),
+           Instance(b.instance_id, np.asfortranarray(b.x), b.d, b.p[::-1][::-1], b.var_d,
+                    b.sigma_d, b.sigma_p, b.mask_pixels, b.valid_pixels, b.var_p)]
+    for case in (list(insts), list(insts) + odd):
+        out = {}
+        for enabled in (True, False):
+            monkeypatch.setattr(compiled, "ENABLED", enabled)
+            out[enabled] = _pad(case, 300, np.random.default_rng(3))
+        for fast, slow in zip(out[True], out[False]):
+            assert fast.dtype == slow.dtype
+            np.testing.assert_array_equal(fast, slow)

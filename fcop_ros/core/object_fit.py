@@ -74,10 +74,32 @@ def _pad(instances, max_pixels: int, rng: np.random.Generator):
     for k, inst in enumerate(instances):
         n = len(inst.d)
         pick = rng.choice(n, m, replace=False) if n > m else np.arange(n)
+        if compiled.ENABLED and _plain_rows(inst.x, inst.d, inst.p):
+            _pad_rows_k(X, D, P, V, k, inst.x, inst.d, inst.p, pick)
+            continue
         k_n = len(pick)
         X[k, :k_n], D[k, :k_n], P[k, :k_n] = inst.x[pick], inst.d[pick], inst.p[pick] - 0.5
         V[k, :len(pick)] = True
     return X, D, P, V
+
+
+def _plain_rows(*arrays) -> bool:
+    """Whether the arrays are C-contiguous float64, the one signature _pad_rows_k is compiled
+    for."""
+    return all(isinstance(a, np.ndarray) and a.dtype == np.float64 and a.flags.c_contiguous
+               for a in arrays)
+
+
+@kernel
+def _pad_rows_k(X, D, P, V, k, x, d, p, pick):
+    """_pad's rows of object k: x, d and p - 0.5 at the pixels ``pick``, marked valid, in one
+    pass instead of three fancy-index gathers and four slice assignments."""
+    for r in range(pick.size):
+        i = pick[r]
+        X[k, r, 0], X[k, r, 1] = x[i, 0], x[i, 1]
+        D[k, r] = d[i]
+        P[k, r, 0], P[k, r, 1], P[k, r, 2] = p[i, 0] - 0.5, p[i, 1] - 0.5, p[i, 2] - 0.5
+        V[k, r] = True
 
 
 def _orthogonal_fit(P, Y, W, proper: bool):
