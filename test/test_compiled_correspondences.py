@@ -185,3 +185,61 @@ def test_mask_types(monkeypatch, dtype):
         fast, slow = _extract_both(monkeypatch, depth, nocs, mm, **ESTIMATOR)
         assert len(fast) > 0
         assert_same_instances(fast, slow)
+
+
+@pytest.mark.parametrize("dtype", ["int8", "uint8", "int16", "uint64"])
+def test_eroded_crops(dtype):
+    """The compiled crop mask (compare, erode, stride in one pass) is cv2.erode's with a zero
+    border, for random blobs, boxes inside and at the image's edge, 0-2 erosions, strides 1-3."""
+    import cv2
+
+    from fcop_ros.core.correspondences import _eroded_crop_k
+
+    rng = np.random.default_rng(41)
+    compared = 0
+    for _ in range(60):
+        h, w = (int(v) for v in rng.integers(1, 40, 2))
+        m = np.zeros((h, w), np.int64)
+        for iid in (1, 2, 3):
+            y0, x0 = rng.integers(0, h), rng.integers(0, w)
+            m[y0:y0 + rng.integers(1, h + 1), x0:x0 + rng.integers(1, w + 1)] = iid
+        m[rng.random((h, w)) < 0.05] = rng.integers(0, 4)
+        if np.dtype(dtype).kind == "i":
+            m[rng.random((h, w)) < 0.05] = -1
+        m = m.astype(dtype)
+        raw = m.view(np.uint8).reshape(h, w * m.itemsize)
+        r0, r1 = sorted(int(v) for v in rng.integers(0, h + 1, 2))
+        c0, c1 = sorted(int(v) for v in rng.integers(0, w + 1, 2))
+        if r1 == r0 or c1 == c0:
+            continue
+        for k in (0, 1, 2):
+            for st in (1, 2, 3):
+                want = m[r0:r1, c0:c1] == 1
+                if k:
+                    want = cv2.erode(want.astype(np.uint8), np.ones((3, 3), np.uint8),
+                                     iterations=k, borderType=cv2.BORDER_CONSTANT,
+                                     borderValue=0).astype(bool)
+                got = _eroded_crop_k(raw, m.itemsize, 1, r0, r1, c0, c1, k, st)
+                np.testing.assert_array_equal(got, want[::st, ::st])
+                compared += 1
+    assert compared >= 300
+
+
+@pytest.mark.parametrize("dtype", ["int8", "uint8", "int16", "uint32", "int64"])
+def test_id_pass_stops_at_a_large_id(dtype):
+    """The compiled id pass counts and boxes ids up to 16 as the per-id numpy pass does
+    (negative values are background) and gives up, for the histogram path, at a larger id."""
+    from fcop_ros.core.correspondences import _few_ids_and_boxes, _few_ids_and_boxes_compiled
+
+    rng = np.random.default_rng(8)
+    m = rng.integers(0, 17, (48, 64)).astype(dtype)
+    if np.dtype(dtype).kind == "i":
+        m[rng.random(m.shape) < 0.2] = -3
+    fast = _few_ids_and_boxes_compiled(m, 16, 5)
+    slow = _few_ids_and_boxes(m, 16, 5)
+    assert fast is not None
+    np.testing.assert_array_equal(fast[0], slow[0])
+    np.testing.assert_array_equal(fast[1], slow[1])
+    assert fast[2] == slow[2]
+    m[40, 50] = 17
+    assert _few_ids_and_boxes_compiled(m, 16, 5) is None

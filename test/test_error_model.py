@@ -121,3 +121,17 @@ def test_a_singular_fit_gives_no_derivative(monkeypatch, use_kernels):
     d = depth_influence(inst, flat)
     assert np.all(np.isnan(d[0]))
     assert np.isfinite(d[1:][fit.ok[1:]]).all()
+
+
+@pytest.mark.skipif(compiled.numba is None, reason="numba is not installed")
+def test_compiled_influence_reads_the_same_rows_of_any_layout(monkeypatch):
+    """The kernel's rows gathered object by object (C-contiguous float64 instances) or read from
+    the concatenation (any other layout): the same numbers, to the bit."""
+    monkeypatch.setattr(compiled, "ENABLED", True)
+    for preset in ("predicted", "sensor"):
+        fr, inst = _objects(preset, 200)
+        fit = _fit(inst, fr.focal)
+        odd = [dataclasses.replace(i, x=np.asfortranarray(i.x)) for i in inst]
+        np.testing.assert_array_equal(depth_influence(inst, fit), depth_influence(odd, fit))
+        small = depth_influence(inst, fit, max_pixels=40)  # every k-th of more rows
+        np.testing.assert_array_equal(small, depth_influence(odd, fit, max_pixels=40))

@@ -28,6 +28,7 @@ random subsets, and their values agree up to rounding.
 """
 from __future__ import annotations
 
+import math
 import sys
 from dataclasses import dataclass, replace
 
@@ -158,10 +159,13 @@ def _few_ids_and_boxes(mask: np.ndarray, top_id: int, min_pixels: int):
 
 def _few_ids_and_boxes_compiled(mask: np.ndarray, top_id: int, min_pixels: int):
     """_few_ids_and_boxes by one compiled pass over the mask's bytes (native integers): one
-    compiled signature for every integer type, so the one warm_up compiles serves them all."""
+    compiled signature for every integer type, so the one warm_up compiles serves them all.
+    None as soon as the pass meets an id above ``top_id`` (so no np.max pass is needed first)."""
     mask = np.ascontiguousarray(mask)
     raw = mask.view(np.uint8).reshape(mask.shape[0], mask.shape[1] * mask.dtype.itemsize)
-    count, box = _few_ids_k(raw, mask.dtype.itemsize, top_id)
+    count, box, above = _few_ids_k(raw, mask.dtype.itemsize, top_id, mask.dtype.kind == "i")
+    if above:
+        return None
     ids = np.flatnonzero(count >= max(min_pixels, 1))
     ids = ids[ids > 0]
     return ids.astype(np.int64), count[ids], [tuple(int(v) for v in box[i]) for i in ids]
@@ -266,14 +270,17 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
     else:
         cx, cy = (float(v) for v in principal_point)
     rng = np.random.default_rng() if rng is None else rng
-    top_id = int(mask.max()) if mask.size else 0
-    if top_id <= _FEW_IDS:
+    few = None
+    if compiled.ENABLED and mask.dtype.isnative and sys.byteorder == "little" and mask.size:
+        # One compiled pass counts and boxes the ids up to _FEW_IDS, or stops at a larger id.
+        few = _few_ids_and_boxes_compiled(mask, _FEW_IDS, min_object_pixels)
+    top_id = int(mask.max()) if few is None and mask.size else 0
+    if few is not None:
+        ids, counts, boxes = few
+    elif top_id <= _FEW_IDS:
         # Few possible ids: one comparison per id gives its count and box (OpenCV), about 3x
         # faster than a histogram of the whole image plus a box pass.
-        if compiled.ENABLED and mask.dtype.isnative and sys.byteorder == "little":
-            ids, counts, boxes = _few_ids_and_boxes_compiled(mask, top_id, min_object_pixels)
-        else:
-            ids, counts, boxes = _few_ids_and_boxes(mask, top_id, min_object_pixels)
+        ids, counts, boxes = _few_ids_and_boxes(mask, top_id, min_object_pixels)
     else:
         # Negative ids are background; the clipped ids viewed as unsigned need no second clip.
         labels = mask if mask.dtype.kind == "u" else np.maximum(mask, 0).view(
@@ -292,17 +299,26 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         boxes = _bounding_boxes(labels, ids)
     pad = denoise_radius + erode_px + 1
     crops = []
+    raw = None
+    if compiled.ENABLED and mask.dtype.isnative and sys.byteorder == "little":
+        mask = np.ascontiguousarray(mask)
+        raw = mask.view(np.uint8).reshape(h, w * mask.dtype.itemsize)
     for iid, npix, (r0, r1, c0, c1) in zip(ids, counts, boxes):
         r0, r1, c0, c1 = max(r0 - pad, 0), min(r1 + pad, h), max(c0 - pad, 0), min(c1 + pad, w)
-        inst = mask[r0:r1, c0:c1] == iid
-        if erode_px > 0:
-            inst = cv2.erode(inst.astype(np.uint8), np.ones((3, 3), np.uint8),
-                             iterations=int(erode_px),
-                             borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
         # Large instances are processed on a strided grid: far more pixels than max_pixels add
         # cost but little accuracy.
-        st = max(1, int(np.ceil(np.sqrt(npix / (2.0 * max_pixels)))))
-        crops.append(_Crop(int(iid), int(npix), r0, c0, st, inst[::st, ::st],
+        st = max(1, math.ceil(math.sqrt(float(npix) / (2.0 * max_pixels))))
+        if raw is not None:
+            inst = _eroded_crop_k(raw, mask.dtype.itemsize, int(iid), r0, r1, c0, c1,
+                                  int(erode_px), st)
+        else:
+            inst = mask[r0:r1, c0:c1] == iid
+            if erode_px > 0:
+                inst = cv2.erode(inst.astype(np.uint8), np.ones((3, 3), np.uint8),
+                                 iterations=int(erode_px),
+                                 borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+            inst = inst[::st, ::st]
+        crops.append(_Crop(int(iid), int(npix), r0, c0, st, inst,
                            depth[r0:r1:st, c0:c1:st], nocs[r0:r1:st, c0:c1:st]))
     if not crops:
         return out
@@ -944,6 +960,58 @@ def _crop_kernel(depth, nocs, inst, r0, c0, st, rad, cx, cy, min_px, denoise_rad
     return 2, rr, cc, d, p, xu, xv, cn, sd, sp
 
 
+@kernel_helper
+def _eroded_crop_t(vals, iid, r0, r1, c0, c1, k, st):
+    """_eroded_crop_k on the mask's values ``vals`` (unsigned integers)."""
+    h, w = r1 - r0, c1 - c0
+    a = np.empty((h, w), np.uint8)  # the instance's pixels of the box, then eroded along rows
+    for i in range(h):
+        row, ai = vals[r0 + i, c0:c1], a[i]
+        for j in range(w):
+            ai[j] = row[j] == iid
+    if k > 0 and w > 0:
+        b = np.empty(w, np.uint8)
+        for i in range(h):
+            ai = a[i]
+            for _ in range(k):  # k 3-wide erosions, the box's outside as background
+                b[0] = 0
+                b[w - 1] = 0
+                for j in range(1, w - 1):
+                    b[j] = ai[j - 1] & ai[j] & ai[j + 1]
+                ai[:] = b
+    out = np.zeros(((h + st - 1) // st, (w + st - 1) // st), np.bool_)
+    acc = np.empty(w, np.uint8)
+    for q in range(out.shape[0]):  # down the columns, only for the rows kept
+        i = q * st
+        if i < k or i >= h - k:
+            continue
+        acc[:] = a[i - k]
+        for ii in range(i - k + 1, i + k + 1):
+            ai = a[ii]
+            for j in range(w):
+                acc[j] &= ai[j]
+        for c in range(out.shape[1]):
+            out[q, c] = acc[c * st] != 0
+    return out
+
+
+@kernel
+def _eroded_crop_k(raw, itemsize, iid, r0, r1, c0, c1, k, st):
+    """``(mask[r0:r1, c0:c1] == iid)`` eroded ``k`` times by a 3x3 square, the box's outside
+    counting as background (cv2.erode with a zero border, as the numpy path does), then every
+    st-th row and column; the mask seen as the bytes ``raw`` of ``itemsize``-byte native
+    integers, read as unsigned (one compiled signature for every integer type). The 3x3 square
+    is a 3-wide erosion along rows, then one down the columns (only for the rows kept), each in
+    branch-free loops over contiguous rows."""
+    if itemsize == 1:
+        return _eroded_crop_t(raw, np.uint8(iid), r0, r1, c0, c1, k, st)
+    if itemsize == 2:
+        return _eroded_crop_t(raw.view(np.uint16), np.uint16(iid), r0, r1, c0, c1, k, st)
+    if itemsize == 4:
+        return _eroded_crop_t(raw.view(np.uint32), np.uint32(iid), r0, r1, c0, c1, k, st)
+    return _eroded_crop_t(raw.view(np.uint64), np.uint64(iid), r0, r1, c0, c1, k, st)
+
+
 @kernel
 def _denoised_pick_k(pick, d, p, xu, xv, cn, var_d_px, var_p_px):
     """The rows ``pick`` of a denoised crop's output as an instance's arrays: (x, d, p, var_d,
@@ -1015,10 +1083,11 @@ def _add_to_box(count, box, v, i, j):
 
 
 @kernel_helper
-def _ids_to_boxes_k(vals, words, top, count, box):
+def _ids_to_boxes_k(vals, words, top, limit, count, box):
     """Count and box the ids 1..top of the mask ``vals`` (unsigned, so negative ids are large
     and ignored); ``words``: the same rows as 8-byte words, or None. Background comes 8 bytes
-    at a time: a zero word is skipped whole."""
+    at a time: a zero word is skipped whole. Returns True, unfinished, at the first id above
+    top (a value up to ``limit``, the type's largest positive one)."""
     h, w = vals.shape
     per_word = w // words.shape[1] if words is not None else w
     for i in range(h):
@@ -1026,8 +1095,11 @@ def _ids_to_boxes_k(vals, words, top, count, box):
         if words is None:
             for j in range(w):
                 v = row[j]
-                if v != 0 and v <= top:
-                    _add_to_box(count, box, np.int64(v), i, j)
+                if v != 0:
+                    if v <= top:
+                        _add_to_box(count, box, np.int64(v), i, j)
+                    elif v <= limit:
+                        return True
             continue
         wrow = words[i]
         for q in range(wrow.size):
@@ -1035,16 +1107,21 @@ def _ids_to_boxes_k(vals, words, top, count, box):
                 continue
             for j in range(q * per_word, (q + 1) * per_word):
                 v = row[j]
-                if v != 0 and v <= top:
-                    _add_to_box(count, box, np.int64(v), i, j)
+                if v != 0:
+                    if v <= top:
+                        _add_to_box(count, box, np.int64(v), i, j)
+                    elif v <= limit:
+                        return True
+    return False
 
 
 @kernel
-def _few_ids_k(raw, itemsize, top):
+def _few_ids_k(raw, itemsize, top, signed):
     """Pixel count and half-open box (row0, row1, col0, col1) of each id 1..top in a mask of
     ``itemsize``-byte native integers seen as bytes ``raw``, read as unsigned integers of that
-    size; other values (negative ones are large) are ignored. Bytes, so that one compiled
-    signature serves every integer type; 8-byte words of them where the rows allow."""
+    size (negative values of a ``signed`` type are large, and ignored), and whether an id above
+    top was met (then the counts are unfinished). Bytes, so that one compiled signature serves
+    every integer type; 8-byte words of them where the rows allow."""
     h = raw.shape[0]
     w = raw.shape[1] // itemsize
     count = np.zeros(top + 1, np.int64)
@@ -1053,11 +1130,16 @@ def _few_ids_k(raw, itemsize, top):
         box[v, 0], box[v, 2] = h, w
     words = raw.view(np.uint64) if raw.shape[1] % 8 == 0 and raw.ctypes.data % 8 == 0 else None
     if itemsize == 1:
-        _ids_to_boxes_k(raw, words, np.uint8(top), count, box)
+        above = _ids_to_boxes_k(raw, words, np.uint8(top),
+                                np.uint8(0x7F if signed else 0xFF), count, box)
     elif itemsize == 2:
-        _ids_to_boxes_k(raw.view(np.uint16), words, np.uint16(top), count, box)
+        above = _ids_to_boxes_k(raw.view(np.uint16), words, np.uint16(top),
+                                np.uint16(0x7FFF if signed else 0xFFFF), count, box)
     elif itemsize == 4:
-        _ids_to_boxes_k(raw.view(np.uint32), words, np.uint32(top), count, box)
+        above = _ids_to_boxes_k(raw.view(np.uint32), words, np.uint32(top),
+                                np.uint32(0x7FFFFFFF if signed else 0xFFFFFFFF), count, box)
     else:
-        _ids_to_boxes_k(raw.view(np.uint64), words, np.uint64(top), count, box)
-    return count, box
+        above = _ids_to_boxes_k(raw.view(np.uint64), words, np.uint64(top),
+                                np.uint64(0x7FFFFFFFFFFFFFFF if signed else 0xFFFFFFFFFFFFFFFF),
+                                count, box)
+    return count, box, above

@@ -20,7 +20,7 @@ import numpy as np
 from . import compiled
 from .compiled import kernel
 from .correspondences import _mean
-from .object_fit import _CAUCHY, ObjectFits, _lu_factor, _lu_solve
+from .object_fit import _CAUCHY, ObjectFits, _lu_factor, _lu_solve, _plain_rows
 
 #: The depth-error patterns, in the order of :func:`depth_influence`'s columns.
 PATTERNS = ("relief", "offset")
@@ -41,12 +41,22 @@ def depth_influence(instances, fits: ObjectFits, max_pixels: int = 300,
         return out
     m = min(max(len(i.d) for i in instances), max_pixels)
     if compiled.ENABLED:
-        sizes = np.array([len(i.d) for i in instances], dtype=np.int64)
+        if all(_plain_rows(i.x, i.d, i.p) for i in instances):
+            # Only the rows the kernel reads (every k-th, at most m per object), gathered
+            # object by object: then it reads all of each object's rows, the same ones.
+            cnt = np.array([min(len(i.d), m) for i in instances], dtype=np.int64)
+            offsets = np.concatenate([[0], np.cumsum(cnt)])
+            x, d, p = np.empty((offsets[-1], 2)), np.empty(offsets[-1]), np.empty((offsets[-1], 3))
+            for k, inst in enumerate(instances):
+                _every_kth_rows_k(x, d, p, offsets[k], inst.x, inst.d, inst.p, m)
+        else:
+            sizes = np.array([len(i.d) for i in instances], dtype=np.int64)
+            offsets = np.concatenate([[0], np.cumsum(sizes)])
+            x, d, p = (np.concatenate([getattr(i, a) for i in instances]).astype(np.float64,
+                                                                                copy=False)
+                       for a in ("x", "d", "p"))
         out = _influence_kernel(
-            np.concatenate([i.x for i in instances]).astype(np.float64, copy=False),
-            np.concatenate([i.d for i in instances]).astype(np.float64, copy=False),
-            np.concatenate([i.p for i in instances]).astype(np.float64, copy=False),
-            np.concatenate([[0], np.cumsum(sizes)]), m, fits.focal, fits.scale,
+            x, d, p, offsets, m, fits.focal, fits.scale,
             np.ascontiguousarray(fits.rotation), np.ascontiguousarray(fits.translation),
             np.ascontiguousarray(fits.tilt), fits.sigma_px, fits.sigma_depth, depth_tilt)
         out[~(fits.ok & np.all(np.isfinite(out), 1))] = np.nan
@@ -125,6 +135,18 @@ def depth_influence(instances, fits: ObjectFits, max_pixels: int = 300,
     out = dtheta[:, 0, :]
     out[~(fits.ok & np.all(np.isfinite(out), 1))] = np.nan
     return out
+
+
+@kernel
+def _every_kth_rows_k(x_out, d_out, p_out, start, x, d, p, m):
+    """The rows of one object that _influence_kernel reads (up to m, every k-th as it picks
+    them) written from row ``start`` of the outputs."""
+    n = d.size
+    for j in range(min(n, m)):
+        i = j * (n - 1) // max(m - 1, 1) if n > m else j
+        x_out[start + j, 0], x_out[start + j, 1] = x[i, 0], x[i, 1]
+        d_out[start + j] = d[i]
+        p_out[start + j, 0], p_out[start + j, 1], p_out[start + j, 2] = p[i, 0], p[i, 1], p[i, 2]
 
 
 @kernel
