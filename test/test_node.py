@@ -355,6 +355,21 @@ def test_only_the_mask_stamped_zero_is_named_and_never_resets(harness, capfd):
     assert "mask message(s) with an outlier stamp" in capfd.readouterr().err
 
 
+def test_mirrored_nocs_are_warned_not_counted_as_rejected(harness, capfd):
+    """A NOCS image whose channels are reversed (bgr as rgb) fits only as a mirror image: the
+    frame is used (the focal does not care), so it is a warning, not a rejection."""
+    from dataclasses import replace
+
+    h = harness()
+    fr = clean_frame(4)
+    fr = replace(fr, nocs=np.ascontiguousarray(fr.nocs[..., ::-1]))
+    assert h.frame(frame_messages(fr, T0))
+    assert h.node.warnings["mirrored_nocs"] >= 1
+    assert h.node.rejected.total() == 0 and len(h.node.window) == 1
+    assert abs(h.node.window_estimate.focal / fr.focal - 1) < 1e-2
+    assert "only as a mirror image" in capfd.readouterr().err
+
+
 def test_mismatched_and_empty_frame_ids_are_warned(harness, capfd):
     h = harness()
     d, n, m = frame_messages(clean_frame(4), T0)

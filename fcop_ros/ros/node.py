@@ -714,7 +714,7 @@ class FcopNode(Node):
         )
         if est.mirrored:
             with self._lock:
-                self.rejected["mirrored_nocs"] += len(est.mirrored)
+                self.warnings["mirrored_nocs"] += len(est.mirrored)
             self._throttle.warn(
                 "mirrored_nocs",
                 f"fcop_node: the NOCS of instance(s) {est.mirrored} fit their shape "
