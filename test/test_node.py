@@ -506,3 +506,17 @@ def test_a_stray_frame_of_another_size_without_evidence_keeps_the_window(harness
     assert len(h.node.window) == 5
     err = capfd.readouterr().err
     assert "image size changed" not in err and "16x16 frame without focal evidence" in err
+
+
+def test_depth_without_nocs_ages_the_estimate_and_diagnostics_say_so(harness):
+    """A reviewer stopped the NOCS topic: CameraInfo went on with the old estimate and
+    /diagnostics stayed OK. Depth images answered while no complete frame matches now WARN."""
+    h = harness()
+    assert h.frame(frame_messages(clean_frame(1), T0))
+    assert h.node.diagnostic_status().level == DiagnosticStatus.OK
+    for k in range(1, 4):
+        h.send(frame_messages(clean_frame(1), T0 + k * DT), which=(0,))  # depth only
+    assert spin_until(h.ex, lambda: h.node.camera_info_published == 4, 10)
+    st = h.node.diagnostic_status()
+    assert st.level == DiagnosticStatus.WARN, st.message
+    assert "3 depth images" in st.message and "no matched depth, NOCS and mask set" in st.message

@@ -274,6 +274,12 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "estimator behind: skipped 110 of 150 frames",
         ),
         (
+            {},
+            Rates(5.0, 0, 0, 0, answered=150),
+            DiagnosticStatus.WARN,
+            "150 depth images in the last 5.0 s but no matched depth, NOCS and mask set",
+        ),  # a reviewer stopped the NOCS topic: CameraInfo went on, diagnostics said OK
+        (
             {"busy_for": 1.0},
             QUIET,
             DiagnosticStatus.OK,
@@ -292,8 +298,9 @@ def test_rate_window_spans_back_to_the_newest_reading_at_least_five_seconds_old(
     rw.add(3.0, 90, 60, 30)
     r = rw.add(6.0, 180, 120, 60)  # 0 s is the newest reading at least 5 s old
     assert r.span == 6.0 and r.frame_hz == 30.0 and r.estimator_hz == 20.0 and r.skipped == 60
-    r = rw.add(9.0, 360, 150, 60)  # now 3 s is: the reading at 0 s is forgotten
+    r = rw.add(9.0, 360, 150, 60, 400)  # now 3 s is: the reading at 0 s is forgotten
     assert r.span == 6.0 and r.matched == 270 and r.processed == 90 and r.skipped == 30
+    assert r.answered == 400
 
 
 # ----- the DDS environment

@@ -50,12 +50,14 @@ class DiagnosticsInput:
 
 @dataclass(frozen=True)
 class Rates:
-    """Frames matched, processed and skipped over the last ``span`` seconds, and their rates."""
+    """Frames matched, processed and skipped over the last ``span`` seconds, and their rates;
+    ``answered``: depth images given a CameraInfo in that time."""
 
     span: float
     matched: int
     processed: int
     skipped: int
+    answered: int = 0
 
     @property
     def frame_hz(self) -> float:
@@ -72,20 +74,22 @@ class RateWindow:
 
     def __init__(self, seconds: float = 5.0):
         self.seconds = seconds
-        self._samples: deque = deque()  # (time, matched, processed, skipped)
+        self._samples: deque = deque()  # (time, matched, processed, skipped, answered)
 
-    def add(self, now: float, matched: int, processed: int, skipped: int) -> Rates:
-        self._samples.append((now, matched, processed, skipped))
+    def add(self, now: float, matched: int, processed: int, skipped: int,
+            answered: int = 0) -> Rates:
+        self._samples.append((now, matched, processed, skipped, answered))
         while len(self._samples) > 1 and now - self._samples[1][0] >= self.seconds:
             self._samples.popleft()
-        t0, m0, p0, s0 = self._samples[0]
-        return Rates(now - t0, matched - m0, processed - p0, skipped - s0)
+        t0, m0, p0, s0, a0 = self._samples[0]
+        return Rates(now - t0, matched - m0, processed - p0, skipped - s0, answered - a0)
 
 
 def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     """(level, message, {key: value}) of the node's status: ERROR when the estimator is stalled,
     WARN without a focal (saying so while the kernels are being prepared), with one held back by
-    focal_range (changed at run time) or max_uncertainty, or when the estimator skipped more
+    focal_range (changed at run time) or max_uncertainty, when depth images keep coming but no
+    complete frame has matched lately (the estimate ages), or when the estimator skipped more
     frames than it estimated lately; else OK."""
     win = d.window
     std = getattr(win, "std_rel", None)
@@ -113,6 +117,13 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
             f"focal {win.focal:.1f} px held back: std_rel "
             f"{'unknown' if std is None else f'{std:.4f}'} above max_uncertainty "
             f"{d.max_uncertainty}"
+        )
+    elif rates.answered > 0 and rates.matched == 0:
+        level = WARN
+        message = (
+            f"focal {win.focal:.1f} px from an ageing estimate: {rates.answered} depth images "
+            f"in the last {rates.span:.1f} s but no matched depth, NOCS and mask set (is the "
+            "NOCS or mask topic silent?)"
         )
     elif rates.skipped > rates.processed:
         level = WARN

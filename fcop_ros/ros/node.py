@@ -908,7 +908,8 @@ class FcopNode(Node):
                 kernels=compiled.describe(),
                 warming_up=self._warming_up,
             )
-        rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped)
+        rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped,
+                                reading.camera_info_published)
         return diagnostic_status(
             f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading, rates
         )
