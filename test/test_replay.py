@@ -122,15 +122,24 @@ def test_a_first_compile_longer_than_the_timeout_is_waited_for(tmp_path, monkeyp
     per-frame timeout must not count it (make demo failed on a fresh single-core machine)."""
     from fcop_ros.core import compiled
 
-    real = compiled.warm_up
+    real_warm_up, real_spin = compiled.warm_up, replay_offline.spin
+    timed_out = threading.Event()
+
+    def spin(*args, **kw):
+        ok = real_spin(*args, **kw)
+        if not ok:
+            timed_out.set()
+        return ok
 
     def slow_compile():
-        time.sleep(3.0)  # stands in for numba compiling the kernels
-        return real()
+        # Numba compiling the kernels, until the replay's wait has run out at least once.
+        assert timed_out.wait(60)
+        return real_warm_up()
 
+    monkeypatch.setattr(replay_offline, "spin", spin)
     monkeypatch.setattr(compiled, "warm_up", slow_compile)
     bag = tiny_bag(tmp_path / "in", frames=3)
-    s = run(bag, tmp_path / "out", timeout=1.0)
+    s = run(bag, tmp_path / "out", timeout=5.0)
     assert s.frames_read == 3 and s.frames_estimated == 3
     assert "compiling its estimator's kernels" in capsys.readouterr().err
 
