@@ -1083,35 +1083,38 @@ def _add_to_box(count, box, v, i, j):
 
 
 @kernel_helper
+def _span_to_boxes(row, i, j0, j1, top, limit, count, box):
+    """Count and box the ids of row i's columns j0..j1-1; True at the first id above top (a
+    value up to ``limit``)."""
+    for j in range(j0, j1):
+        v = row[j]
+        if v != 0:
+            if v <= top:
+                _add_to_box(count, box, np.int64(v), i, j)
+            elif v <= limit:
+                return True
+    return False
+
+
+@kernel_helper
 def _ids_to_boxes_k(vals, words, top, limit, count, box):
     """Count and box the ids 1..top of the mask ``vals`` (unsigned, so negative ids are large
     and ignored); ``words``: the same rows as 8-byte words, or None. Background comes 8 bytes
     at a time: a zero word is skipped whole. Returns True, unfinished, at the first id above
     top (a value up to ``limit``, the type's largest positive one)."""
     h, w = vals.shape
-    per_word = w // words.shape[1] if words is not None else w
+    if words is None:
+        for i in range(h):
+            if _span_to_boxes(vals[i], i, 0, w, top, limit, count, box):
+                return True
+        return False
+    per_word = w // words.shape[1]
     for i in range(h):
-        row = vals[i]
-        if words is None:
-            for j in range(w):
-                v = row[j]
-                if v != 0:
-                    if v <= top:
-                        _add_to_box(count, box, np.int64(v), i, j)
-                    elif v <= limit:
-                        return True
-            continue
         wrow = words[i]
         for q in range(wrow.size):
-            if wrow[q] == 0:
-                continue
-            for j in range(q * per_word, (q + 1) * per_word):
-                v = row[j]
-                if v != 0:
-                    if v <= top:
-                        _add_to_box(count, box, np.int64(v), i, j)
-                    elif v <= limit:
-                        return True
+            if wrow[q] != 0 and _span_to_boxes(vals[i], i, q * per_word, (q + 1) * per_word,
+                                               top, limit, count, box):
+                return True
     return False
 
 
