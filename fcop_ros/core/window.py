@@ -152,8 +152,7 @@ class FocalWindow:
         cut = np.arange(k, n - k + 1)  # the first newer frame
         old = np.array([_middle(y[:c]) for c in cut])
         new = np.array([_middle(y[c:]) for c in cut])
-        gap = np.maximum(new[:, 0] - old[:, 1], old[:, 0] - new[:, 1])
-        diff = np.where(gap > 0, np.where(new[:, 0] > old[:, 1], gap, -gap), 0.0)
+        diff = np.maximum(new[:, 0] - old[:, 1], 0.0) - np.maximum(old[:, 0] - new[:, 1], 0.0)
         old, new = old.mean(1), new.mean(1)
         best = int(np.argmax(np.abs(diff) * np.sqrt(cut * (n - cut))))
         c = int(cut[best])
