@@ -395,10 +395,11 @@ class FcopNode(Node):
             self._history.popleft()
         return win
 
-    def _in_focal_range(self, focal: float) -> bool:
-        """focal_range bounds every published focal, also one the window holds from frames
-        estimated before the range was changed at run time."""
-        return self.p["focal_min"] <= focal <= self.p["focal_max"]
+    @staticmethod
+    def _in_focal_range(focal: float, p: dict) -> bool:
+        """focal_range (parameters ``p``) bounds every published focal, also one the window
+        holds from frames estimated before the range was changed at run time."""
+        return p["focal_min"] <= focal <= p["focal_max"]
 
     def _update_estimate_locked(self, win) -> None:
         """The publish gate: the window's focal goes out only within max_uncertainty and
@@ -408,7 +409,7 @@ class FcopNode(Node):
             win.focal is None
             or std is None
             or std > self.p["max_uncertainty"]
-            or not self._in_focal_range(win.focal)
+            or not self._in_focal_range(win.focal, self.p)
             or self._size is None
         ):
             self._estimate = None
@@ -833,7 +834,7 @@ class FcopNode(Node):
             response.message = f"no focal estimate yet: {win.reason}"
         elif std is None:
             response.message = "the focal estimate has no uncertainty yet"
-        elif est is None and not p["focal_min"] <= win.focal <= p["focal_max"]:
+        elif est is None and not self._in_focal_range(win.focal, p):
             response.message = (
                 f"focal {win.focal:.1f} px is outside focal_range "
                 f"[{p['focal_min']:g}, {p['focal_max']:g}]"
