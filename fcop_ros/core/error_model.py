@@ -41,20 +41,16 @@ def depth_influence(instances, fits: ObjectFits, max_pixels: int = 300,
         return out
     m = min(max(len(i.d) for i in instances), max_pixels)
     if compiled.ENABLED:
-        if all(_plain_rows(i.x, i.d, i.p) for i in instances):
-            # Only the rows the kernel reads (every k-th, at most m per object), gathered
-            # object by object: then it reads all of each object's rows, the same ones.
-            cnt = np.array([min(len(i.d), m) for i in instances], dtype=np.int64)
-            offsets = np.concatenate([[0], np.cumsum(cnt)])
-            x, d, p = np.empty((offsets[-1], 2)), np.empty(offsets[-1]), np.empty((offsets[-1], 3))
-            for k, inst in enumerate(instances):
-                _every_kth_rows_k(x, d, p, offsets[k], inst.x, inst.d, inst.p, m)
-        else:
-            sizes = np.array([len(i.d) for i in instances], dtype=np.int64)
-            offsets = np.concatenate([[0], np.cumsum(sizes)])
-            x, d, p = (np.concatenate([getattr(i, a) for i in instances]).astype(np.float64,
-                                                                                copy=False)
-                       for a in ("x", "d", "p"))
+        # Only the rows the kernel reads (every k-th, at most m per object), gathered object
+        # by object: then it reads all of each object's rows, the same ones.
+        cnt = np.array([min(len(i.d), m) for i in instances], dtype=np.int64)
+        offsets = np.concatenate([[0], np.cumsum(cnt)])
+        x, d, p = np.empty((offsets[-1], 2)), np.empty(offsets[-1]), np.empty((offsets[-1], 3))
+        for k, inst in enumerate(instances):
+            rows = (inst.x, inst.d, inst.p)
+            if not _plain_rows(*rows):  # the one signature the kernel is compiled for
+                rows = [np.ascontiguousarray(a, dtype=np.float64) for a in rows]
+            _every_kth_rows_k(x, d, p, offsets[k], *rows, m)
         out = _influence_kernel(
             x, d, p, offsets, m, fits.focal, fits.scale,
             np.ascontiguousarray(fits.rotation), np.ascontiguousarray(fits.translation),
