@@ -270,8 +270,10 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
     else:
         cx, cy = (float(v) for v in principal_point)
     rng = np.random.default_rng() if rng is None else rng
+    # The kernels read the mask's bytes as native little-endian integers.
+    compiled_mask = compiled.ENABLED and mask.dtype.isnative and sys.byteorder == "little"
     few = None
-    if compiled.ENABLED and mask.dtype.isnative and sys.byteorder == "little" and mask.size:
+    if compiled_mask and mask.size:
         # One compiled pass counts and boxes the ids up to _FEW_IDS, or stops at a larger id.
         few = _few_ids_and_boxes_compiled(mask, _FEW_IDS, min_object_pixels)
     top_id = int(mask.max()) if few is None and mask.size else 0
@@ -300,7 +302,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
     pad = denoise_radius + erode_px + 1
     crops = []
     raw = None
-    if compiled.ENABLED and mask.dtype.isnative and sys.byteorder == "little":
+    if compiled_mask:
         mask = np.ascontiguousarray(mask)
         raw = mask.view(np.uint8).reshape(h, w * mask.dtype.itemsize)
     for iid, npix, (r0, r1, c0, c1) in zip(ids, counts, boxes):
