@@ -124,14 +124,31 @@ def test_a_singular_fit_gives_no_derivative(monkeypatch, use_kernels):
 
 
 @pytest.mark.skipif(compiled.numba is None, reason="numba is not installed")
+def _influence_of_all_rows(inst, fit, m):
+    """The kernel picking every k-th row itself from the concatenation of all rows."""
+    from fcop_ros.core.error_model import _influence_kernel
+
+    offsets = np.concatenate([[0], np.cumsum([len(i.d) for i in inst])])
+    out = _influence_kernel(
+        *(np.ascontiguousarray(np.concatenate([getattr(i, a) for i in inst]), np.float64)
+          for a in ("x", "d", "p")),
+        offsets, min(max(len(i.d) for i in inst), m), fit.focal, fit.scale,
+        np.ascontiguousarray(fit.rotation), np.ascontiguousarray(fit.translation),
+        np.ascontiguousarray(fit.tilt), fit.sigma_px, fit.sigma_depth, True)
+    out[~(fit.ok & np.all(np.isfinite(out), 1))] = np.nan
+    return out
+
+
 def test_compiled_influence_reads_the_same_rows_of_any_layout(monkeypatch):
-    """The kernel's rows gathered object by object (C-contiguous float64 instances) or read from
-    the concatenation (any other layout): the same numbers, to the bit."""
+    """The kernel's rows gathered object by object (any layout, converted where the kernel
+    cannot take it) are the rows the kernel picks itself from all of them: the same numbers, to
+    the bit."""
     monkeypatch.setattr(compiled, "ENABLED", True)
     for preset in ("predicted", "sensor"):
         fr, inst = _objects(preset, 200)
         fit = _fit(inst, fr.focal)
         odd = [dataclasses.replace(i, x=np.asfortranarray(i.x)) for i in inst]
-        np.testing.assert_array_equal(depth_influence(inst, fit), depth_influence(odd, fit))
-        small = depth_influence(inst, fit, max_pixels=40)  # every k-th of more rows
-        np.testing.assert_array_equal(small, depth_influence(odd, fit, max_pixels=40))
+        for m in (300, 40):  # 40: every k-th of more rows
+            full = _influence_of_all_rows(inst, fit, m)
+            np.testing.assert_array_equal(depth_influence(inst, fit, max_pixels=m), full)
+            np.testing.assert_array_equal(depth_influence(odd, fit, max_pixels=m), full)
