@@ -1,7 +1,7 @@
 """Accuracy, bias and honesty of the uncertainty on the randomised world, held-out beside tuned.
 
     python bench/world_accuracy.py [--frames 60] [--sequences 40] [--zoom-sequences 8]
-        [--heldout | --heldout2] [--parts single bias window preset_bias]
+        [--heldout | --heldout2] [--parts single bias window preset_bias weights]
 
 Tuned rows use the seeds the estimator's few constants were chosen on (frames from seed 1000,
 sequences from seed 5000, the tuning error model). Held-out rows (--heldout) use seeds from
@@ -18,7 +18,9 @@ alone, its strength drawn up to its base bound. Window: static orbiting sequence
 (window of 30) against the single frames of the same sequences; zoom sequences (x1.25 and x0.8
 at frame 20 of 40): frames until the window stays within 5% of the new focal length, and
 restarts on static ones. Preset bias (``--parts preset_bias``): fcop_ros's signed median over
-``--bias-frames`` frames of each full preset, with its standard error.
+``--bias-frames`` frames of each full preset, with its standard error. Weights (``--parts
+weights``): within a frame, how the objects' errors rank with their systematic and their
+noise variance, and the frame's error under either weighting.
 """
 from __future__ import annotations
 
@@ -173,6 +175,36 @@ def preset_bias(presets, frames, first_seed, variant):
               f"{np.std(err) / np.sqrt(err.size):.2f} |", flush=True)
 
 
+def weights(presets, frames, first_seed, variant):
+    """What ranks the objects' errors within a frame: each combined object's |error| against
+    its systematic variance (std_rel^2 - std_rel_noise^2) and its noise variance (Spearman,
+    averaged over frames with at least four objects), and the frame's median |error| with the
+    objects weighted by 1 / noise (fcop_ros) or by 1 / std_rel^2."""
+    from scipy.stats import spearmanr
+
+    print("\n| preset | frames (with >= 4 objects) | rank correlation of |error| with systematic "
+          "variance | with noise variance | median abs error %: weights 1 / noise | "
+          "weights 1 / std_rel^2 |")
+    print("|---|---|---|---|---|---|")
+    for preset in presets:
+        r_sys, r_noise, e_noise, e_total = [], [], [], []
+        for s in range(frames):
+            fr = world_frame(preset, first_seed + s, variant)
+            est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False)
+            if est.focal is None:
+                continue
+            f, std, noise = (np.array(c) for c in zip(*est.object_focals.values()))
+            y = np.log(f / fr.focal)
+            for w, out in ((1 / noise**2, e_noise), (1 / std**2, e_total)):
+                out.append(abs(np.sum(w * y) / w.sum()))
+            if y.size >= 4:
+                r_sys.append(spearmanr(np.abs(y), std**2 - noise**2)[0])
+                r_noise.append(spearmanr(np.abs(y), noise**2)[0])
+        print(f"| {preset} | {len(e_noise)} ({len(r_sys)}) | {np.nanmean(r_sys):.2f} | "
+              f"{np.nanmean(r_noise):.2f} | {100 * np.median(e_noise):.2f} | "
+              f"{100 * np.median(e_total):.2f} |", flush=True)
+
+
 def run_sequence(preset, seed, n, variant, zoom=1.0):
     seq = world_frames(preset, seed, n, variant, zoom_frame=n // 2 if zoom != 1.0 else None,
                        zoom_factor=zoom)
@@ -257,9 +289,10 @@ def main() -> None:
     held.add_argument("--heldout2", action="store_true",
                       help="the second held-out seeds and error model instead")
     ap.add_argument("--parts", nargs="+", default=["single", "bias", "window"],
-                    choices=["single", "bias", "window", "preset_bias"],
+                    choices=["single", "bias", "window", "preset_bias", "weights"],
                     help="preset_bias (not run by default): fcop_ros's signed median over "
-                    "--bias-frames frames of each full preset")
+                    "--bias-frames frames of each full preset; weights (not run by default): "
+                    "what ranks the objects' errors within a frame, over --bias-frames frames")
     ap.add_argument("--bias-frames", type=int, default=2000,
                     help="frames per preset for preset_bias")
     args = ap.parse_args()
@@ -287,6 +320,8 @@ def main() -> None:
         window(presets, args.sequences, seq_seed, variant, args.zoom_sequences)
     if "preset_bias" in args.parts:
         preset_bias(presets, args.bias_frames, frame_seed, variant)
+    if "weights" in args.parts:
+        weights(presets, args.bias_frames, frame_seed, variant)
 
 
 if __name__ == "__main__":

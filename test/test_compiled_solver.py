@@ -155,7 +155,7 @@ def test_warm_up_compiles_what_solve_triplets_runs(monkeypatch):
 
 
 def test_combine_sums_as_numpy():
-    """combine's Python sums give numpy's bits (its pairwise order), so random_effects gives
+    """combine's Python sums give numpy's bits (its pairwise order), so combine_objects gives
     what it gave on numpy arrays."""
     rng = np.random.default_rng(19)
     for n in [*range(0, 40), 127, 128, 129, 300, 1001]:
@@ -163,9 +163,11 @@ def test_combine_sums_as_numpy():
         assert combine._sum(a.tolist()) == float(np.sum(a))
 
 
-def _numpy_random_effects(y, v, tau0, nu0, reject=3.0):
-    """random_effects as it was written on numpy arrays: the reference."""
-    def comb(y, v):
+def _numpy_combine_objects(y, v, noise, tau0, nu0, reject=3.0):
+    """combine_objects written on numpy arrays: the reference."""
+    noise = np.minimum(noise, v)
+
+    def comb(y, v, noise):
         k, w = y.size, 1.0 / v
         mean_fe = float(np.sum(w * y) / w.sum())
         tau2_dl = 0.0
@@ -174,23 +176,26 @@ def _numpy_random_effects(y, v, tau0, nu0, reject=3.0):
             c = w.sum() - np.sum(w * w) / w.sum()
             tau2_dl = max(0.0, (q - (k - 1)) / c) if c > 0 else 0.0
         tau2 = (nu0 * tau0 ** 2 + (k - 1) * tau2_dl) / (nu0 + k - 1)
-        ws = 1.0 / (v + tau2)
-        return float(np.sum(ws * y) / ws.sum()), float(1.0 / ws.sum()), float(tau2)
+        wn = 1.0 / noise
+        return (float(np.sum(wn * y) / wn.sum()),
+                float(np.sum(wn * wn * (v + tau2)) / (wn.sum() * wn.sum())),
+                float(1.0 / wn.sum()), float(tau2))
 
-    used = np.isfinite(y) & np.isfinite(v) & (v > 0)
+    used = np.isfinite(y) & np.isfinite(v) & (v > 0) & np.isfinite(noise) & (noise > 0)
     while used.sum() >= 3:
         idx = np.flatnonzero(used)
         z = np.zeros(idx.size)
         for n, i in enumerate(idx):
-            mean, var, tau2 = comb(y[idx[idx != i]], v[idx[idx != i]])
+            rest = idx[idx != i]
+            mean, var, _, tau2 = comb(y[rest], v[rest], noise[rest])
             z[n] = abs(y[i] - mean) / np.sqrt(v[i] + tau2 + var)
         if z.max() <= reject:
             break
         used[idx[int(np.argmax(z))]] = False
-    return (*comb(y[used], v[used]), used) if used.any() else None
+    return (*comb(y[used], v[used], noise[used]), used) if used.any() else None
 
 
-def test_random_effects_as_on_numpy_arrays():
+def test_combine_objects_as_on_numpy_arrays():
     rng = np.random.default_rng(20)
     for t in range(3000):
         n = int(rng.integers(0, 12))
@@ -198,14 +203,16 @@ def test_random_effects_as_on_numpy_arrays():
         if t % 3 == 0 and n:
             y[rng.integers(n)] += rng.normal(0, 0.3)  # an outlier to drop
         v = 10.0 ** rng.uniform(-7, -2, n)
+        noise = v * 10.0 ** rng.uniform(-3, 0.3, n)  # some above v: clipped to it
         if t % 5 == 0 and n:
             v[rng.integers(n)] = (np.nan, 0.0, np.inf)[t % 3]
         tau0, nu0 = ((0.005, 2.0), (0.0, 2.0), (0.02, 0.5))[t % 3]
-        got, want = combine.random_effects(y, v, tau0, nu0), _numpy_random_effects(y, v, tau0, nu0)
+        got = combine.combine_objects(y, v, noise, tau0, nu0)
+        want = _numpy_combine_objects(y, v, noise, tau0, nu0)
         assert (got is None) == (want is None)
         if got is not None:
-            assert (got.mean, got.var, got.tau2) == want[:3]
-            np.testing.assert_array_equal(got.used, want[3])
+            assert (got.mean, got.var, got.noise, got.tau2) == want[:4]
+            np.testing.assert_array_equal(got.used, want[4])
 
 
 @needs_numba

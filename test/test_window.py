@@ -84,10 +84,9 @@ def test_weights_by_uncertainty():
 
 def test_a_budget_that_does_not_vary_weighs_no_frame():
     """Frames that share one systematic error, each with its own noise (0.2-3%) and its own
-    stated budget (0.5-5%, unrelated to its error): the frames' spread shows the budgets do not
-    vary, so the window weighs them by their noise. Measured over 200 windows: median distance of
-    the window from the shared error 0.116%; weights 1 / std_rel^2 give 0.163%, the true noise's
-    weights 0.111%."""
+    stated budget (0.5-5%, unrelated to its error): the window weighs them by their noise.
+    Measured over 200 windows: median distance of the window from the shared error 0.111%
+    (the true noise's weights); weights 1 / std_rel^2 give 0.163%."""
     rng = np.random.default_rng(3)
     miss = []
     for _ in range(200):

@@ -31,10 +31,12 @@ def signed_errors(preset, n):
 
 # Signed median focal error (%) of each zero-mean mechanism alone (strength drawn up to its base
 # bound), 24 frames:
-# measured field +0.00, relief -0.15, offset -0.07, depth_pixel -0.00, nocs_pixel -0.01,
-# nocs_field -0.21, shape -0.18 (relief -0.43, shape -0.17 while the objects' prior spread
-# ignored their lean on depth). (Per-pixel NOCS noise gave +0.56% before the NOCS were
-# regression-calibrated for the noise left after denoising: errors in the fit's regressor.)
+# measured field -0.00, relief +0.00, offset -0.02, depth_pixel +0.00, nocs_pixel +0.01,
+# nocs_field -0.11, shape -0.07 (field +0.00, relief -0.15, offset -0.07, depth_pixel -0.00,
+# nocs_pixel -0.01, nocs_field -0.21, shape -0.18 before objects were weighted by their noise;
+# relief -0.43, shape -0.17 while the objects' prior spread ignored their lean on depth).
+# (Per-pixel NOCS noise gave +0.56% before the NOCS were regression-calibrated for the noise
+# left after denoising: errors in the fit's regressor.)
 @pytest.mark.parametrize("family", ZERO_MEAN_FAMILIES)
 def test_no_bias_from_a_zero_mean_mechanism(family):
     err, _ = signed_errors(f"only_{family}", 24)
@@ -42,12 +44,11 @@ def test_no_bias_from_a_zero_mean_mechanism(family):
     assert abs(np.median(err)) <= 0.005
 
 
-# Full presets: sensor (40 frames) median |e| 0.016%, signed -0.00%, coverage 90.0% (97.5%
-# while the objects' prior spread ignored that exact NOCS leave f to the pixels, not the depths);
-# predicted (200 frames) median |e| 2.95%, signed +0.91%, coverage 87.0%. The predicted preset
-# errs by about +0.7% (+0.59% on 200 tuning frames; +0.69% and +0.73% with the unseen-depth term
-# before it followed the fit's lean on depth), and a median of 200 frames scatters by about
-# 0.3%: 80 frames measured +1.01%.
+# Full presets: sensor (40 frames) median |e| 0.007%, signed -0.00%, coverage 95.0%; predicted
+# (200 frames) median |e| 2.38%, signed +0.48%, coverage 89.5%. Before objects were weighted by
+# their noise: 0.016%, -0.00%, 90.0% and 2.95%, +0.91%, 87.0% (sensor coverage 97.5% while the
+# objects' prior spread ignored that exact NOCS leave f to the pixels, not the depths). A median
+# of 200 frames scatters by about 0.3% (docs/BENCHMARKS.md has the preset's bias over 2000).
 @pytest.mark.parametrize("preset,frames,cover_min",
                          [("sensor", 40, 0.85), ("predicted", 200, 0.85)])
 def test_full_presets_unbiased_and_std_rel_covers(preset, frames, cover_min):
@@ -59,9 +60,11 @@ def test_full_presets_unbiased_and_std_rel_covers(preset, frames, cover_min):
 
 def test_window_averages_on_moving_camera():
     """Eight orbiting 320x240 sequences of the predicted preset (window of 30, frames 5..29
-    scored): measured single-frame median 4.61%, window 2.07% (ratio 0.45), window coverage 100%
+    scored): measured single-frame median 4.33%, window 2.71% (ratio 0.62), window coverage 100%
     (above the issue's 98%: on these small, harsh frames the window keeps more of the frames'
-    systematic budget than the truth needs), no restart."""
+    systematic budget than the truth needs), no restart. (Before objects and frames were
+    weighted by their noise: 4.61%, 2.07%, 0.45. 40 such sequences, seeds 7500-7539, a script:
+    4.55%, 2.73%, 0.60 before, 4.13%, 2.47%, 0.60 after; eight were a lucky draw.)"""
     single, win, cover, restarts = [], [], [], 0
     for q in range(8):
         seq = world_frames("predicted", FIRST_SEED + 500 + q, 30, size=(320, 240))
@@ -75,7 +78,7 @@ def test_window_averages_on_moving_camera():
                 win.append(abs(np.log(r.focal / fr.focal)))
                 cover.append(win[-1] <= 2 * r.std_rel)
     assert restarts == 0
-    assert np.median(win) <= 0.5 * np.median(single)
+    assert np.median(win) <= 0.65 * np.median(single)
     assert np.mean(cover) >= 0.85
 
 

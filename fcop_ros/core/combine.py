@@ -1,14 +1,21 @@
-"""Random-effects combination of per-object focal estimates (in log f).
+"""Combination of per-object focal estimates (in log f) into the frame's.
 
-Each object o gives log f_o with a within-object variance v_o (its fit's curvature). Objects
-also err systematically (the category prior's shape is not this object's, the depth network
-flattens it, a smooth depth error tilts it): a between-object variance tau^2 that no single
-object's residuals show, but their disagreement does. tau^2 is estimated from that disagreement
-(DerSimonian-Laird) and shrunk towards a prior tau0^2 worth ``nu0`` objects, so one or two
-objects still get an honest spread. The combined estimate weights each object by
-1 / (v_o + tau^2); its variance is 1 / sum of those weights. Objects further than ``reject``
-standard deviations from the others are dropped first (a wrong category, a garbage mask, a
-depth error the fit could not absorb).
+Each object o gives log f_o with the variance n_o of its fit's curvature (pixel noise, the
+information its pixels carry) and a total variance v_o >= n_o that adds the systematic errors
+its residuals cannot show (:mod:`.error_model`). Objects also disagree beyond both (the
+category prior's shape is not this object's, the depth network flattens it, a smooth depth
+error tilts it): a between-object variance tau^2 that no single object's residuals show, but
+their disagreement does. tau^2 is estimated from that disagreement (DerSimonian-Laird) and
+shrunk towards a prior tau0^2 worth ``nu0`` objects, so one or two objects still get an honest
+spread.
+
+The estimate weights each object by 1 / n_o: within a frame the fits' noise ranks the objects'
+errors far better than the systematic budget does, which is sized for the variance on average,
+not to tell objects apart (``bench/world_accuracy.py --parts weights``; weights
+1 / (v_o + tau^2) left the median error a quarter higher, docs/BENCHMARKS.md). The variance
+is that of this weighted mean under the full model, sum(w^2 (v + tau^2)) / sum(w)^2. Objects
+further than ``reject`` standard deviations from the others are dropped first (a wrong
+category, a garbage mask, a depth error the fit could not absorb).
 """
 from __future__ import annotations
 
@@ -20,33 +27,38 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Combined:
-    """mean: combined log f; var: its variance; tau2: between-object variance used; used: (n,)
-    bool, the objects kept."""
+    """mean: combined log f; var: its variance; noise: the part of var that the fits' noise
+    makes; tau2: between-object variance used; used: (n,) bool, the objects kept."""
 
     mean: float
     var: float
+    noise: float
     tau2: float
     used: np.ndarray
 
 
-def random_effects(y, v, tau0: float, nu0: float = 2.0, reject: float = 3.0) -> Combined | None:
-    """Combine estimates y (n,) with within variances v (n,); None when nothing is finite.
+def combine_objects(y, v, noise, tau0: float, nu0: float = 2.0,
+                    reject: float = 3.0) -> Combined | None:
+    """Combine estimates y (n,) with total variances v (n,) and noise variances noise (n,)
+    (clipped to v); None when nothing is finite.
 
     With three or more objects, each is first tested against the combination of the others
     (a leave-one-out prediction interval of ``reject`` standard deviations): an outlier can
     then not hide by inflating tau^2. The worst offender goes, and the test is repeated."""
     y = np.asarray(y, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
-    used = np.isfinite(y) & np.isfinite(v) & (v > 0)
+    noise = np.minimum(np.asarray(noise, dtype=np.float64), v)
+    used = np.isfinite(y) & np.isfinite(v) & (v > 0) & np.isfinite(noise) & (noise > 0)
     # A frame has a handful of objects: Python floats, summed in numpy's order (``_sum``),
     # give numpy's numbers at a fraction of the cost of numpy calls on arrays of five.
-    yl, vl = y.tolist(), v.tolist()
+    yl, vl, nl = y.tolist(), v.tolist(), noise.tolist()
     while used.sum() >= 3:
         idx = np.flatnonzero(used).tolist()
         z = np.zeros(len(idx))
         for n, i in enumerate(idx):
             rest = [j for j in idx if j != i]
-            mean, var, tau2 = _combine([yl[j] for j in rest], [vl[j] for j in rest], tau0, nu0)
+            mean, var, _, tau2 = _combine([yl[j] for j in rest], [vl[j] for j in rest],
+                                          [nl[j] for j in rest], tau0, nu0)
             z[n] = abs(yl[i] - mean) / math.sqrt(vl[i] + tau2 + var)
         if z.max() <= reject:
             break
@@ -54,12 +66,14 @@ def random_effects(y, v, tau0: float, nu0: float = 2.0, reject: float = 3.0) -> 
     if not used.any():
         return None
     keep = np.flatnonzero(used).tolist()
-    mean, var, tau2 = _combine([yl[j] for j in keep], [vl[j] for j in keep], tau0, nu0)
-    return Combined(mean, var, tau2, used)
+    mean, var, var_noise, tau2 = _combine([yl[j] for j in keep], [vl[j] for j in keep],
+                                          [nl[j] for j in keep], tau0, nu0)
+    return Combined(mean, var, var_noise, tau2, used)
 
 
-def _combine(y: list, v: list, tau0, nu0):
-    """(mean, var, tau2) of the estimates y with within variances v (lists of floats)."""
+def _combine(y: list, v: list, noise: list, tau0, nu0):
+    """(mean, var, noise var, tau2) of the estimates y with total variances v and noise
+    variances ``noise`` (lists of floats)."""
     k = len(y)
     w = [1.0 / vi for vi in v]
     sw = _sum(w)
@@ -70,9 +84,11 @@ def _combine(y: list, v: list, tau0, nu0):
         c = sw - _sum([wi * wi for wi in w]) / sw
         tau2_dl = max(0.0, (q - (k - 1)) / c) if c > 0 else 0.0
     tau2 = (nu0 * tau0 ** 2 + (k - 1) * tau2_dl) / (nu0 + k - 1)
-    ws = [1.0 / (vi + tau2) for vi in v]
-    sws = _sum(ws)
-    return _sum([wi * yi for wi, yi in zip(ws, y)]) / sws, 1.0 / sws, float(tau2)
+    wn = [1.0 / ni for ni in noise]
+    swn = _sum(wn)
+    mean = _sum([wi * yi for wi, yi in zip(wn, y)]) / swn
+    var = _sum([wi * wi * (vi + tau2) for wi, vi in zip(wn, v)]) / (swn * swn)
+    return mean, var, 1.0 / swn, float(tau2)
 
 
 def _sum(a: list) -> float:

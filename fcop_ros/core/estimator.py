@@ -4,7 +4,7 @@ Pipeline: per-instance correspondences -> random triplets on every object -> min
 votes -> interval stabbing over the votes of all objects (the paper's frame-wise consistency:
 the starting focal length and the evidence threshold) -> every object's own focal length from
 a fit in which depth errors enter linearly (:mod:`.object_fit`) -> objects whose NOCS do not
-explain their shape are refused -> a random-effects combination of the objects' focal lengths
+explain their shape are refused -> a combination of the objects' focal lengths
 (:mod:`.combine`), whose spread gives ``std_rel`` -> the focal range -> each object's pose at
 the combined focal length. ``method="ransac"`` replaces stabbing by the paper's RANSAC variant;
 ``refine=False`` stops at the stabbed votes (the paper's method).
@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import compiled
-from .combine import random_effects
+from .combine import combine_objects
 from .camera import image_centre
 from .correspondences import Instance, calibrated_nocs, check_images, extract_instances
 from .error_model import depth_influence, object_variances
@@ -43,9 +43,9 @@ class FocalEstimate:
     disagreement, repeats while the same objects are in view). focal_votes: the stabbed value of
     the triplet votes. interval: (lo, hi) focal range in pixels of the maximal consensus region.
     inlier_count / inlier_ratio: votes agreeing with it. votes_per_object / inliers_per_object:
-    {instance_id: count}. object_focals: {instance_id: (focal, std_rel)} of the objects
-    combined; rejected: {instance_id: why} of instances not used; mirrored: instance ids whose
-    NOCS fit only as a reflection (channel order or axis convention); instances_skipped:
+    {instance_id: count}. object_focals: {instance_id: (focal, std_rel, std_rel_noise)} of the
+    objects combined; rejected: {instance_id: why} of instances not used; mirrored: instance ids
+    whose NOCS fit only as a reflection (channel order or axis convention); instances_skipped:
     instances beyond ``max_instances`` (the smallest), not used; objects: poses of the combined,
     unmirrored objects when ``estimate_focal`` ran the pose stage (see :mod:`.pose`); votes: all
     valid triplet votes (px);
@@ -413,7 +413,8 @@ def estimate_focal(
     # when exact NOCS let the pixels fix f.
     lean = relief_lean[good & np.isfinite(relief_lean)]
     tau0 = opt.object_tau * (float(np.sqrt(np.mean(lean**2))) if lean.size else 1.0)
-    comb = random_effects(np.log(fits.focal[good]), var[good], tau0, opt.object_tau_weight)
+    comb = combine_objects(np.log(fits.focal[good]), var[good], fits.var_log_focal[good], tau0,
+                           opt.object_tau_weight)
     if comb is None:
         est.reason = "no finite per-object estimate"
         return est
@@ -421,7 +422,11 @@ def estimate_focal(
     for k, (inst, used) in enumerate(zip(kept, comb.used)):
         j = np.flatnonzero(good)[k]
         if used:
-            est.object_focals[inst.instance_id] = (float(fits.focal[j]), float(np.sqrt(var[j])))
+            est.object_focals[inst.instance_id] = (
+                float(fits.focal[j]),
+                float(np.sqrt(var[j])),
+                float(np.sqrt(min(fits.var_log_focal[j], var[j]))),
+            )
         else:
             est.rejected[inst.instance_id] = "its focal length disagrees with the other objects"
     # Poses only for objects whose own focal length is informative: a flat spurious blob or a
@@ -431,11 +436,7 @@ def estimate_focal(
         for inst, u in zip(kept, comb.used)
         if u and est.object_focals[inst.instance_id][1] <= opt.pose_max_std
     ]
-    # Of the combination's variance sum(w^2 (v + tau^2)) / sum(w)^2, the fits' curvature is noise.
-    w = 1.0 / (var[good][comb.used] + comb.tau2)
-    est.std_rel_noise = float(
-        np.sqrt(np.sum(w * w * fits.var_log_focal[good][comb.used])) / w.sum()
-    )
+    est.std_rel_noise = float(np.sqrt(comb.noise))
     return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var)), used, opt, rng, poses)
 
 

@@ -15,12 +15,10 @@ budget varies from frame to frame and averages out; the rest cannot. Errors that
 (lag-one autocorrelation rho) average out over n_eff = n (1 - rho) / (1 + rho) frames, not n.
 A frame without ``std_rel_noise`` counts as all noise.
 
-The estimate weights every frame by the part of its variance that varies: 1 / (n_t + q (v_t -
-n_t)), with q = Q / B the share of the budget that the spread shows to vary (measured about
-the mean weighted by 1 / v_t; 1 without a budget). An error common to all frames shifts every
-frame alike and says nothing about which frame to trust: frames that share one error are
-weighed by their noise, frames whose budgets vary independently by their whole variance. V is
-taken about this estimate, with its weights.
+The estimate weights every frame by 1 / n_t, the information its pixels carry, as the frame
+weighs its objects (:mod:`.combine`): the systematic budget is sized for the variance on
+average and does not tell frames apart (weights that counted its varying share left the window
+further from the truth, docs/BENCHMARKS.md). V is taken about this estimate, with its weights.
 
 Frames further than ``reject_sigma`` robust standard deviations of the frames' own spread (at
 least their noise) from the median are left out: a frame whose objects were all wrong.
@@ -212,31 +210,25 @@ class FocalWindow:
         n = y.size
         budget = float(np.median(v - noise))
         noise_var = n / float(np.sum(1.0 / noise))
-        w = 1.0 / v
+        w = 1.0 / noise
         mean = float(np.sum(w * y) / w.sum())
         var = budget + noise_var / n  # too few frames to see what varies
         if n >= 3:
-            varies, var = self._spread(y, w, mean, budget, noise_var)
-            # The budget that repeats is common to the frames and weighs none of them: weight
-            # each by the part of its variance that varies (its noise and the varying share
-            # of its budget), then measure again about the new mean.
-            share = min(varies / budget, 1.0) if budget > 0 else 1.0
-            w = 1.0 / (noise + share * (v - noise))
-            mean = float(np.sum(w * y) / w.sum())
-            _, var = self._spread(y, w, mean, budget, noise_var)
+            var = self._spread(y, w, mean, budget, noise_var)
         return WindowEstimate(float(np.exp(mean)), float(np.sqrt(var)), support, n_all, n)
 
     @staticmethod
     def _spread(y, w, mean, budget, noise_var):
-        """(variance that varies from frame to frame beyond noise, variance of the weighted
-        mean) of frames y with weights w about ``mean``; see the module docstring."""
+        """Variance of the weighted mean of frames y with weights w about ``mean``: the budget
+        less what the spread shows to vary, plus the spread over the effective frames (see
+        the module docstring)."""
         n = y.size
         r = y - mean
         spread2 = float(np.sum(w * r * r) / (n - 1)) * n / float(w.sum())
         rho = _lag_one(r)
         n_eff = max(n * (1.0 - rho) / (1.0 + rho), 1.0)
         varies = max(spread2 * max(1.0 - np.sqrt(2.0 / n_eff), 0.0) - noise_var, 0.0)
-        return varies, max(budget - varies, 0.0) + max(spread2, noise_var) / n_eff
+        return max(budget - varies, 0.0) + max(spread2, noise_var) / n_eff
 
 
 def _middle(y: np.ndarray) -> tuple[float, float]:
