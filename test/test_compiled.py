@@ -59,3 +59,25 @@ def test_warm_up_reaches_every_kernel(monkeypatch):
     compiled.warm_up()
     missed = [k.py_func.__qualname__ for k in compiled.KERNELS if not k.signatures]
     assert not missed
+
+
+def test_float32_images_read_as_they_are(monkeypatch):
+    """float32 images (the node's) give, bit for bit, what their float64 copies give: the
+    correspondences kernel reads them as they are and widens each value exactly; and the
+    warm-up has compiled that signature, so the first float32 frame waits for no compilation."""
+    from fcop_ros.core import correspondences
+
+    monkeypatch.setattr(compiled, "ENABLED", True)
+    compiled.warm_up()
+    before = list(correspondences._crop_kernel.signatures)
+    for k in range(3):
+        fr = scenes.world_frame("predicted", FIRST_SEED + 50 + k)
+        d32, n32 = fr.depth.astype(np.float32), fr.nocs.astype(np.float32)
+        a = estimate_focal(d32, n32, fr.mask, seed=k)
+        b = estimate_focal(d32.astype(np.float64), n32.astype(np.float64), fr.mask, seed=k)
+        assert a.focal == b.focal and a.std_rel == b.std_rel
+        assert a.object_focals == b.object_focals
+        assert all(np.array_equal(pa.rotation, pb.rotation)
+                   and np.array_equal(pa.translation, pb.translation) and pa.scale == pb.scale
+                   for pa, pb in zip(a.objects, b.objects, strict=True))
+    assert correspondences._crop_kernel.signatures == before

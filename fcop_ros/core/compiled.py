@@ -87,4 +87,6 @@ def warm_up() -> float:
     est = estimate_focal(depth, nocs, mask, seed=0)
     if est.focal is None:
         raise RuntimeError(f"compiled.warm_up: the warm-up frame gave no focal ({est.reason})")
+    # The node's images are float32, which the correspondences kernel reads as they are.
+    estimate_focal(depth.astype(np.float32), nocs.astype(np.float32), mask, seed=0)
     return time.perf_counter() - t

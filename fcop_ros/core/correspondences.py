@@ -362,15 +362,24 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
     return out
 
 
+def _kernel_images(depth, nocs):
+    """depth and NOCS as _crop_kernel reads them: both float32 (the node's images) as they
+    are, else both float64. The kernel widens each value it reads, exactly, so both give the
+    same bits; converting a whole float32 frame to float64 first cost more than a millisecond
+    (640x480). Two types only, both compiled by warm_up, so no frame waits for a compilation."""
+    if depth.dtype == np.float32 and nocs.dtype == np.float32:
+        return np.ascontiguousarray(depth), np.ascontiguousarray(nocs)
+    return (np.ascontiguousarray(depth, dtype=np.float64),
+            np.ascontiguousarray(nocs, dtype=np.float64))
+
+
 def _emit_compiled(out, crops, rads, depth, nocs, centre, rng, min_object_pixels,
                    denoise_radius, outlier_sigma, max_pixels, nocs_tolerance, noise_floor,
                    edge_sigma):
     """The crops' instances appended to ``out`` by the compiled kernel, one call per crop: the
     same instances, pixels and random subsets as _extract_mosaic and the loop that reads it."""
     cx, cy = centre
-    # One type per argument, so that the kernel compiled by warm_up serves every frame.
-    depth = np.ascontiguousarray(depth, dtype=np.float64)
-    nocs = np.ascontiguousarray(nocs, dtype=np.float64)
+    depth, nocs = _kernel_images(depth, nocs)
     args = (int(max(min_object_pixels, 3)), int(denoise_radius), float(outlier_sigma),
             float(nocs_tolerance), float(noise_floor), float(edge_sigma))
     for cr, rad in zip(crops, rads):
