@@ -172,6 +172,9 @@ def frame_estimate(repeats):
             frames, repeats)
 
     no_poses = no_poses_run()
+    # The node hands the estimator float32 images (msg_adapters): the same frames as it sees them.
+    f32 = [(fr.depth.astype(np.float32), fr.nocs.astype(np.float32), fr.mask) for fr in frames]
+    as_node = frame_times(lambda im, k: estimate_focal(*im, seed=k, poses=False), f32, repeats)
     numpy_path = None
     if compiled.ENABLED:  # the numpy fallback on the same frames, right after
         compiled.ENABLED = False
@@ -189,6 +192,8 @@ def frame_estimate(repeats):
     print(f"estimate_focal 640x480, 5 objects ({obj_px:,.0f} object pixels), without poses: "
           f"median {med:.1f} ms, p95 {np.percentile(no_poses, 95):.1f} ms "
           f"(target 5 ms on one quiet core: {verdict(med <= 5)})")
+    print(f"  the same frames as float32 images (as the node passes them): median "
+          f"{np.median(as_node):.1f} ms")
     if numpy_path is not None:
         print(f"  numpy path (FCOP_NUMBA=0) on the same frames: median "
               f"{np.median(numpy_path):.1f} ms; compiled {med / np.median(numpy_path):.2f}x that")
