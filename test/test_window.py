@@ -86,7 +86,8 @@ def test_a_budget_that_does_not_vary_weighs_no_frame():
     """Frames that share one systematic error, each with its own noise (0.2-3%) and its own
     stated budget (0.5-5%, unrelated to its error): the window weighs them by their noise.
     Measured over 200 windows: median distance of the window from the shared error 0.111%
-    (the true noise's weights); weights 1 / std_rel^2 give 0.163%."""
+    (the true noise's weights); weights 1 / std_rel^2 give 0.163%, weights by the noise and
+    the budget's varying share (the window before 61467d1) 0.116%."""
     rng = np.random.default_rng(3)
     miss = []
     for _ in range(200):
@@ -98,7 +99,7 @@ def test_a_budget_that_does_not_vary_weighs_no_frame():
                          std_rel_noise=sigma)
             r = w.add(e, k / 30)
         miss.append(abs(np.log(r.focal / 600.0) - shared))
-    assert np.median(miss) < 0.0014
+    assert np.median(miss) < 0.00114
 
 @pytest.mark.parametrize("step", [1.2, 0.8, 1.5])
 def test_reconverges_after_zoom(step):
