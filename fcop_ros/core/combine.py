@@ -10,12 +10,13 @@ shrunk towards a prior tau0^2 worth ``nu0`` objects, so one or two objects still
 spread.
 
 The estimate weights each object by 1 / n_o: within a frame the fits' noise ranks the objects'
-errors far better than the systematic budget does, which is sized for the variance on average,
-not to tell objects apart (``bench/world_accuracy.py --parts weights``: on 300 frames of each
-of the three error models, weights 1 / std_rel^2 gave the higher median error). The variance
-is that of this weighted mean under the full model, sum(w^2 (v + tau^2)) / sum(w)^2. Objects
-further than ``reject`` standard deviations from the others are dropped first (a wrong
-category, a garbage mask, a depth error the fit could not absorb).
+errors better than the systematic budget does, which is sized for the variance on average, not
+to tell objects apart (``bench/world_accuracy.py --parts weights``: on 300 ``predicted`` frames
+of each of the three error models, weights 1 / std_rel^2 gave the higher median error; the
+weights this replaced, 1 / (v_o + tau^2), compared on the same frames in docs/BENCHMARKS.md).
+The variance is that of this weighted mean under the full model, sum(w^2 (v + tau^2)) /
+sum(w)^2. Objects further than ``reject`` standard deviations from the others are dropped first
+(a wrong category, a garbage mask, a depth error the fit could not absorb).
 """
 from __future__ import annotations
 
