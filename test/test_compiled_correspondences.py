@@ -229,17 +229,21 @@ def test_eroded_crops(dtype):
 def test_id_pass_stops_at_a_large_id(dtype):
     """The compiled id pass counts and boxes ids up to 16 as the per-id numpy pass does
     (negative values are background) and gives up, for the histogram path, at a larger id."""
-    from fcop_ros.core.correspondences import _few_ids_and_boxes, _few_ids_and_boxes_compiled
+    from fcop_ros.core.correspondences import (
+        _few_ids_and_boxes,
+        _few_ids_and_boxes_compiled,
+        _mask_bytes,
+    )
 
     rng = np.random.default_rng(8)
     m = rng.integers(0, 17, (48, 64)).astype(dtype)
     if np.dtype(dtype).kind == "i":
         m[rng.random(m.shape) < 0.2] = -3
-    fast = _few_ids_and_boxes_compiled(m, 16, 5)
+    fast = _few_ids_and_boxes_compiled(_mask_bytes(m), m.dtype, 16, 5)
     slow = _few_ids_and_boxes(m, 16, 5)
     assert fast is not None
     np.testing.assert_array_equal(fast[0], slow[0])
     np.testing.assert_array_equal(fast[1], slow[1])
     assert fast[2] == slow[2]
     m[40, 50] = 17
-    assert _few_ids_and_boxes_compiled(m, 16, 5) is None
+    assert _few_ids_and_boxes_compiled(_mask_bytes(m), m.dtype, 16, 5) is None

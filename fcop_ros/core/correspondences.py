@@ -157,13 +157,20 @@ def _few_ids_and_boxes(mask: np.ndarray, top_id: int, min_pixels: int):
     return np.array(ids, dtype=np.int64), np.array(counts, dtype=np.int64), boxes
 
 
-def _few_ids_and_boxes_compiled(mask: np.ndarray, top_id: int, min_pixels: int):
-    """_few_ids_and_boxes by one compiled pass over the mask's bytes (native integers): one
-    compiled signature for every integer type, so the one warm_up compiles serves them all.
-    None as soon as the pass meets an id above ``top_id`` (so no np.max pass is needed first)."""
+def _mask_bytes(mask: np.ndarray) -> np.ndarray:
+    """The mask's native integers as rows of bytes (h, w * itemsize), of a C-contiguous copy
+    only if it is not one already: what the kernels read, one compiled signature for every
+    integer type."""
     mask = np.ascontiguousarray(mask)
-    raw = mask.view(np.uint8).reshape(mask.shape[0], mask.shape[1] * mask.dtype.itemsize)
-    count, box, above = _few_ids_k(raw, mask.dtype.itemsize, top_id, mask.dtype.kind == "i")
+    return mask.view(np.uint8).reshape(mask.shape[0], mask.shape[1] * mask.dtype.itemsize)
+
+
+def _few_ids_and_boxes_compiled(raw: np.ndarray, dtype, top_id: int, min_pixels: int):
+    """_few_ids_and_boxes by one compiled pass over the mask's bytes ``raw`` (``_mask_bytes``
+    of a mask of integer ``dtype``), so the one signature warm_up compiles serves every integer
+    type. None as soon as the pass meets an id above ``top_id`` (so no np.max pass is needed
+    first)."""
+    count, box, above = _few_ids_k(raw, dtype.itemsize, top_id, dtype.kind == "i")
     if above:
         return None
     ids = np.flatnonzero(count >= max(min_pixels, 1))
@@ -272,10 +279,11 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
     rng = np.random.default_rng() if rng is None else rng
     # The kernels read the mask's bytes as native little-endian integers.
     compiled_mask = compiled.ENABLED and mask.dtype.isnative and sys.byteorder == "little"
+    raw = _mask_bytes(mask) if compiled_mask else None
     few = None
-    if compiled_mask and mask.size:
+    if raw is not None and mask.size:
         # One compiled pass counts and boxes the ids up to _FEW_IDS, or stops at a larger id.
-        few = _few_ids_and_boxes_compiled(mask, _FEW_IDS, min_object_pixels)
+        few = _few_ids_and_boxes_compiled(raw, mask.dtype, _FEW_IDS, min_object_pixels)
     top_id = int(mask.max()) if few is None and mask.size else 0
     if few is not None:
         ids, counts, boxes = few
@@ -301,10 +309,6 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
         boxes = _bounding_boxes(labels, ids)
     pad = denoise_radius + erode_px + 1
     crops = []
-    raw = None
-    if compiled_mask:
-        mask = np.ascontiguousarray(mask)
-        raw = mask.view(np.uint8).reshape(h, w * mask.dtype.itemsize)
     for iid, npix, (r0, r1, c0, c1) in zip(ids, counts, boxes):
         r0, r1, c0, c1 = max(r0 - pad, 0), min(r1 + pad, h), max(c0 - pad, 0), min(c1 + pad, w)
         # Large instances are processed on a strided grid: far more pixels than max_pixels add

@@ -425,7 +425,7 @@ def estimate_focal(
             est.object_focals[inst.instance_id] = (
                 float(fits.focal[j]),
                 float(np.sqrt(var[j])),
-                float(np.sqrt(min(fits.var_log_focal[j], var[j]))),
+                float(np.sqrt(fits.var_log_focal[j])),  # var[j] adds to it (.error_model)
             )
         else:
             est.rejected[inst.instance_id] = "its focal length disagrees with the other objects"
