@@ -85,14 +85,13 @@ def test_window_averages_on_moving_camera():
 def test_zoom_on_the_world_short_of_the_aim():
     """Eight zoom sequences of the predicted preset (seeds 7600-7603, x1.25 and x0.8 at frame 20
     of 40, window of 30): frames until the window is within 5% of the new focal length for
-    good, counted from the zoom (20: never). Measured 20, 20, 20, 11, 20, 10, 20, 15 and two
-    changes detected (at frames 31 and 30); with the weights before 61467d1: 13, 20, 20, 7, 9,
-    14, 20, 20 and three. Short of the issue's aim (15 frames): in three sequences the new
-    focal's frames themselves err by 9-17% (median), and where they err by 1.5-4% (7602 and
-    7601 at x1.25) a 22% step among frames whose std_rel is 4-14% stays below the detector's 6
-    standard errors, which the frames' own std_rel floors (aca597c, against restarts on static
-    scenes), although the part of it that repeats cancels in a step. Kept as a measured floor,
-    not the aim."""
+    good, counted from the zoom (20: never). Measured 20, 20, 20, 11, 1, 1, 20, 15 and three
+    changes detected (at frames 31, 21 and 21). When the frames' whole std_rel floored the
+    step's standard error (aca597c to 1be3974): 20, 20, 20, 11, 20, 10, 20, 15 and two; the
+    clean steps of 7602 (frames within 1.5-3%, std_rel 4-14%) went unseen, although the budget
+    both segments share cancels in a step. Short of the issue's aim (15 frames): in three
+    sequences the new focal's frames themselves err by 9-17% (median), and 7601 at x1.25 swings
+    by +-10% within a few frames, as wide as its step."""
     delays, changes = [], 0
     for seed in range(FIRST_SEED + 600, FIRST_SEED + 604):
         for zoom in (1.25, 0.8):
@@ -106,8 +105,8 @@ def test_zoom_on_the_world_short_of_the_aim():
                 if k >= 20 and (r.focal is None or abs(np.log(r.focal / fr.focal)) > 0.05):
                     bad.append(k - 20)
             delays.append(bad[-1] + 1 if bad else 0)
-    assert sum(d <= 15 for d in delays) >= 3
-    assert changes >= 2
+    assert sum(d <= 15 for d in delays) >= 4
+    assert changes >= 3
 
 
 def _garbage(fr, kind, rng):

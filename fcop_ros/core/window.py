@@ -27,7 +27,8 @@ A zoom is a change point: at the likeliest split of the window into older and ne
 least ``change_frames`` on each side), the difference of the two medians (of an even segment,
 its middle frame nearer the other segment) is compared with its standard error from the frames'
 spread about the two medians, widened for slow drift (persistent error cancels in the
-difference), or from the frames' own ``std_rel`` where that is larger. When it exceeds both
+difference), or from what of the frames' own variance does not cancel, where that is larger:
+their noise, and one segment's systematic budget beyond the other's. When it exceeds both
 ``change_sigma`` standard errors and ``change_threshold`` (relative), the older frames are
 dropped. A change of image size starts a new window. The settings are a :class:`WindowOptions`.
 """
@@ -138,7 +139,7 @@ class FocalWindow:
 
     def _detect_change(self) -> bool:
         """True (and the older frames dropped) when the newer frames moved away from the older."""
-        rated, y, v, _ = self._rated()
+        rated, y, v, noise = self._rated()
         k = self.options.change_frames
         n = y.size
         if n < 2 * k:
@@ -168,8 +169,12 @@ class FocalWindow:
         rho = _lag_one(r) if n > 3 else 0.0
         t *= (1.0 + rho) / (1.0 - rho)
         # Judged against the frames' own uncertainty too: a few frames that err as much as
-        # they say they may are no step.
-        t_old, t_new = max(t, float(np.median(v[:c]))), max(t, float(np.median(v[c:])))
+        # they say they may are no step. The systematic budget both segments share (the same
+        # objects in the same scene) cancels in their difference; their noise and one
+        # segment's budget beyond the other's do not.
+        b_old, b_new = float(np.median(v[:c] - noise[:c])), float(np.median(v[c:] - noise[c:]))
+        t_old = max(t, float(np.median(noise[:c])) + max(b_old - b_new, 0.0))
+        t_new = max(t, float(np.median(noise[c:])) + max(b_new - b_old, 0.0))
         z = abs(diff[best]) / np.sqrt(np.pi / 2 * (t_old / c + t_new / (n - c)))
         if not (
             z > self.options.change_sigma
