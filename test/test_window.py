@@ -7,9 +7,10 @@ from fcop_ros import FocalWindow, WindowOptions
 from fcop_ros.core.estimator import FocalEstimate
 
 
-def estimate(focal, std_rel=0.02, size=(640, 480), support=500, std_rel_noise=None):
+def estimate(focal, std_rel=0.02, size=(640, 480), support=500, std_rel_noise=None,
+             extents=None):
     return FocalEstimate(focal, (319.5, 239.5), size, inlier_count=support, std_rel=std_rel,
-                         std_rel_noise=std_rel_noise)
+                         std_rel_noise=std_rel_noise, object_extents=extents or {})
 
 
 def empty_estimate():
@@ -143,6 +144,47 @@ def test_zoom_among_frames_sharing_a_large_budget():
     assert changed_at is not None and changed_at <= 5
     assert max(errors[15:]) < 0.05
     assert w.changes == 1
+
+
+def _scene(rng, zoom=1.0, objects=(90.0, 60.0, 40.0), jitter=0.01):
+    """Object extents (px m) of a scene seen at ``zoom`` times the focal length."""
+    return {i + 1: e * zoom * np.exp(rng.normal(0, jitter)) for i, e in enumerate(objects)}
+
+
+def test_a_focal_step_the_image_scale_does_not_follow_is_no_zoom():
+    """Tight frames (0.5%) whose focal lengths move by 20% while their objects' extents stay
+    (a new view of objects whose errors moved, e.g. held-out sequence 905021): no restart.
+    Without the extents the same frames restart the window."""
+    for with_extents in (True, False):
+        rng = np.random.default_rng(9)
+        w = FocalWindow(WindowOptions(max_frames=30))
+        for k in range(30):
+            f = 600.0 * (1.2 if k >= 15 else 1.0) * np.exp(rng.normal(0, 0.005))
+            w.add(estimate(f, 0.005, std_rel_noise=0.005,
+                           extents=_scene(rng) if with_extents else None), k / 30)
+        assert w.changes == (0 if with_extents else 1)
+
+
+def test_a_zoom_the_image_scale_shows_is_seen_at_once():
+    """Frames that scatter by 6% (std_rel 10%) through a 22% zoom: their focal lengths alone
+    stand out at the eighth frame after it (frame 27); the objects' extents, which move by the
+    zoom, show it at the second (frame 21), and the window restarts at the zoom itself (the
+    median split there keeps one older frame)."""
+    for with_extents in (True, False):
+        rng = np.random.default_rng(10)
+        w = FocalWindow(WindowOptions(max_frames=30))
+        changed_at, frames_after = None, None
+        for k in range(40):
+            zoom = 1.22 if k >= 20 else 1.0
+            f = 600.0 * zoom * np.exp(rng.normal(0, 0.06))
+            r = w.add(estimate(f, 0.10, std_rel_noise=0.01,
+                               extents=_scene(rng, zoom) if with_extents else None), k / 30)
+            if r.changed and changed_at is None:
+                changed_at, frames_after = k, r.frames
+        if with_extents:
+            assert changed_at == 21 and frames_after == 2
+        else:
+            assert changed_at == 27
 
 
 def test_no_restart_on_static_sequences_with_outlier_frames():

@@ -85,13 +85,12 @@ def test_window_averages_on_moving_camera():
 def test_zoom_on_the_world_short_of_the_aim():
     """Eight zoom sequences of the predicted preset (seeds 7600-7603, x1.25 and x0.8 at frame 20
     of 40, window of 30): frames until the window is within 5% of the new focal length for
-    good, counted from the zoom (20: never). Measured 20, 20, 20, 11, 1, 1, 20, 15 and three
-    changes detected (at frames 31, 21 and 21). When the frames' whole std_rel floored the
-    step's standard error (aca597c to 1be3974): 20, 20, 20, 11, 20, 10, 20, 15 and two; the
-    clean steps of 7602 (frames within 1.5-3%, std_rel 4-14%) went unseen, although the budget
-    both segments share cancels in a step. Short of the issue's aim (15 frames): in three
-    sequences the new focal's frames themselves err by 9-17% (median), and 7601 at x1.25 swings
-    by +-10% within a few frames, as wide as its step."""
+    good, counted from the zoom (20: never). Measured 20, 20, 1, 1, 1, 1, 20, 11 and seven
+    changes detected (six at frame 21, one at 31): the objects' extents show the zoom at its
+    second frame. With the frames' focal lengths alone (f350ff8): 20, 20, 20, 11, 1, 1, 20, 15
+    and three; when their whole std_rel floored a step (until 1be3974): 20, 20, 20, 11, 20, 10,
+    20, 15 and two. Short of the issue's aim (15 frames): in three sequences the new focal's
+    frames themselves err by 9-17% (median), which no restart mends."""
     delays, changes = [], 0
     for seed in range(FIRST_SEED + 600, FIRST_SEED + 604):
         for zoom in (1.25, 0.8):
@@ -105,8 +104,8 @@ def test_zoom_on_the_world_short_of_the_aim():
                 if k >= 20 and (r.focal is None or abs(np.log(r.focal / fr.focal)) > 0.05):
                     bad.append(k - 20)
             delays.append(bad[-1] + 1 if bad else 0)
-    assert sum(d <= 15 for d in delays) >= 4
-    assert changes >= 3
+    assert sum(d <= 15 for d in delays) >= 5
+    assert changes >= 6
 
 
 def _garbage(fr, kind, rng):

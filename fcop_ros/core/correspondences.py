@@ -50,7 +50,8 @@ class Instance:
     NOCS in [0,1]; var_d (n,) and var_p (n,) estimated noise variances of d (m^2) and of each
     NOCS coordinate after denoising; sigma_d and
     sigma_p: estimated per-pixel noise of the raw depth (m) and NOCS; mask_pixels: pixels of
-    the instance in the mask; valid_pixels: usable pixels before subsampling.
+    the instance in the mask; valid_pixels: usable pixels before subsampling; at_border: its
+    mask reaches the edge of the image, which cuts it.
     """
 
     instance_id: int
@@ -63,6 +64,7 @@ class Instance:
     mask_pixels: int
     valid_pixels: int
     var_p: np.ndarray | None = None
+    at_border: bool = False
 
 
 class InstanceList(list):
@@ -310,6 +312,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
     pad = denoise_radius + erode_px + 1
     crops = []
     for iid, npix, (r0, r1, c0, c1) in zip(ids, counts, boxes):
+        at_border = bool(r0 <= 0 or c0 <= 0 or r1 >= h or c1 >= w)
         r0, r1, c0, c1 = max(r0 - pad, 0), min(r1 + pad, h), max(c0 - pad, 0), min(c1 + pad, w)
         # Large instances are processed on a strided grid: far more pixels than max_pixels add
         # cost but little accuracy.
@@ -325,7 +328,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
                                  borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
             inst = inst[::st, ::st]
         crops.append(_Crop(int(iid), int(npix), r0, c0, st, inst,
-                           depth[r0:r1:st, c0:c1:st], nocs[r0:r1:st, c0:c1:st]))
+                           depth[r0:r1:st, c0:c1:st], nocs[r0:r1:st, c0:c1:st], at_border))
     if not crops:
         return out
     # The radius of each crop's box filter: the same window in image pixels (it follows the
@@ -362,7 +365,7 @@ def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pix
             var_p = res.sigma_p ** 2 / np.maximum(res.cnt[rr, cc], 1.0)
         out.append(Instance(cr.iid, x, res.dz[rr, cc].astype(np.float64, copy=False),
                             np.ascontiguousarray(res.pz[:, rr, cc].T), var_d, res.sigma_d,
-                            res.sigma_p, cr.npix, int(valid), var_p))
+                            res.sigma_p, cr.npix, int(valid), var_p, cr.at_border))
     return out
 
 
@@ -398,7 +401,8 @@ def _emit_compiled(out, crops, rads, depth, nocs, centre, rng, min_object_pixels
                     else np.arange(valid))
             x, d, p, var_d, var_p = _denoised_pick_k(pick, d, p, xu, xv, cn, float(sd ** 2),
                                                      float(sp ** 2))
-            out.append(Instance(cr.iid, x, d, p, var_d, sd, sp, cr.npix, int(valid), var_p))
+            out.append(Instance(cr.iid, x, d, p, var_d, sd, sp, cr.npix, int(valid), var_p,
+                                cr.at_border))
             continue
         if valid > max_pixels:
             pick = rng.choice(valid, size=max_pixels, replace=False)
@@ -409,7 +413,8 @@ def _emit_compiled(out, crops, rads, depth, nocs, centre, rng, min_object_pixels
                              rr * cr.st + cr.r0 - cy]).astype(np.float64)
         var_d = np.full(rr.size, sd ** 2)
         var_p = np.full(rr.size, sp ** 2)
-        out.append(Instance(cr.iid, x, d, p, var_d, sd, sp, cr.npix, int(valid), var_p))
+        out.append(Instance(cr.iid, x, d, p, var_d, sd, sp, cr.npix, int(valid), var_p,
+                            cr.at_border))
 
 
 @dataclass
@@ -425,6 +430,7 @@ class _Crop:
     inst: np.ndarray
     dc: np.ndarray
     pc: np.ndarray
+    at_border: bool = False
 
 
 @dataclass
@@ -613,7 +619,8 @@ def calibrated_nocs(inst: Instance) -> Instance:
         p = _calibrated_nocs_k(np.ascontiguousarray(inst.p, np.float64), noise)
         if type(inst) is Instance:  # dataclasses.replace, without its generic field walk
             return Instance(inst.instance_id, inst.x, inst.d, p, inst.var_d, inst.sigma_d,
-                            inst.sigma_p, inst.mask_pixels, inst.valid_pixels, inst.var_p)
+                            inst.sigma_p, inst.mask_pixels, inst.valid_pixels, inst.var_p,
+                            inst.at_border)
         return replace(inst, p=p)
     centre = inst.p.mean(0)
     q = inst.p - centre

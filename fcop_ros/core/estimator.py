@@ -51,7 +51,11 @@ class FocalEstimate:
     valid triplet votes (px);
     instances: the :class:`~.correspondences.Instance` s of the objects that made the estimate,
     the input of the pose stage: ``estimate_poses(est.instances, focal, exclude=est.mirrored)``
-    at any focal length, e.g. a window's.
+    at any focal length, e.g. a window's. object_extents: {instance_id: RMS image radius x
+    median depth (px m)} of the objects that made the estimate, except those the image's edge
+    cuts: the focal length times the object's size, whatever its NOCS say. A zoom scales it;
+    moving the camera or the object does not (the depth makes up for the image size), so the
+    window tells a zoom from frames whose errors moved by it.
     """
 
     focal: float | None
@@ -74,6 +78,13 @@ class FocalEstimate:
     reason: str = ""
     instances_skipped: int = 0
     instances: list = field(default_factory=list, repr=False)
+    object_extents: dict = field(default_factory=dict)
+
+
+def _extent(inst: Instance) -> float:
+    """The instance's RMS image radius about its centroid (px) times its median depth (m)."""
+    r = inst.x - inst.x.mean(0)
+    return float(np.sqrt(np.mean(r[:, 0] ** 2 + r[:, 1] ** 2)) * np.median(inst.d))
 
 
 def _votes(instances: list[Instance], opt: EstimatorOptions, rng: np.random.Generator):
@@ -437,7 +448,9 @@ def estimate_focal(
         if u and est.object_focals[inst.instance_id][1] <= opt.pose_max_std
     ]
     est.std_rel_noise = float(np.sqrt(comb.noise))
-    return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var)), used, opt, rng, poses)
+    combined = [inst for inst, u in zip(kept, comb.used) if u]
+    return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var)), used, opt, rng, poses,
+                   combined)
 
 
 def _finish(
@@ -448,13 +461,20 @@ def _finish(
     opt: EstimatorOptions,
     rng,
     poses: bool = False,
+    measured=None,
 ) -> FocalEstimate:
-    """Enforce the focal range, then attach the poses of the objects that made the estimate."""
+    """Enforce the focal range, then attach the extents of the objects that made the estimate
+    (``measured``, default ``instances``) and the poses of ``instances``."""
     lo, hi = opt.focal_range
     if not lo <= focal <= hi:
         est.reason = f"focal {focal:.1f} px outside focal_range [{lo:g}, {hi:g}]"
         return est
     est.focal, est.std_rel, est.instances = focal, std_rel, list(instances)
+    est.object_extents = {
+        inst.instance_id: _extent(inst)
+        for inst in (instances if measured is None else measured)
+        if not inst.at_border
+    }
     if poses:
         est.objects = estimate_poses(est.instances, focal, exclude=est.mirrored, rng=rng)
     return est

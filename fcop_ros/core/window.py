@@ -30,12 +30,24 @@ spread about the two medians, widened for slow drift (persistent error cancels i
 difference), or from what of the frames' own variance does not cancel, where that is larger:
 their noise, and one segment's systematic budget beyond the other's. When it exceeds both
 ``change_sigma`` standard errors and ``change_threshold`` (relative), the older frames are
-dropped. A change of image size starts a new window. The settings are a :class:`WindowOptions`.
+dropped.
+
+Frames that carry their objects' extents (``FocalEstimate.object_extents``: image radius times
+depth, the focal length times the object's size) also give the window an image scale: per
+frame, the median over its objects of their log extent less that object's median in the window
+(matched by instance id). Pixels and depth alone make it, so the frames' focal errors do not
+move it; a zoom moves it by the zoom. A step in the focal lengths stands only if the image scale
+moved the same way by more than half as much, and a step in the image scale (the same test,
+without a floor) that the focal lengths follow by more than half is a zoom at once. The split
+then moves to the first frame of the trailing run whose image scale is nearer the newer level.
+Frames without extents are judged by their focal lengths alone.
+
+A change of image size starts a new window. The settings are a :class:`WindowOptions`.
 """
 
 from __future__ import annotations
 
-from collections import deque
+from collections import Counter, deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,6 +85,7 @@ class _Frame:
     noise: float
     support: int
     size: tuple | None
+    extents: dict
 
 
 class FocalWindow:
@@ -116,6 +129,7 @@ class FocalWindow:
                 noise,
                 int(estimate.inlier_count),
                 size,
+                _log_extents(estimate) if ok else {},
             )
         )
         while len(self._frames) > self.options.max_frames:
@@ -138,50 +152,42 @@ class FocalWindow:
         )
 
     def _detect_change(self) -> bool:
-        """True (and the older frames dropped) when the newer frames moved away from the older."""
+        """True (and the older frames dropped) when the newer frames moved away from the older
+        and, where the frames carry their objects' extents, the image scale moved with them."""
         rated, y, v, noise = self._rated()
         k = self.options.change_frames
         n = y.size
         if n < 2 * k:
             return False
-        # Medians of the older and newer frames for every split (a lone wild frame moves
-        # neither); the most likely split is the one whose difference stands out most. An even
-        # segment's median is taken as whichever middle frame lies nearer the other segment:
-        # a step needs most of a segment's frames, not two wild ones among four.
-        cut = np.arange(k, n - k + 1)  # the first newer frame
-        old = np.array([_middle(y[:c]) for c in cut])
-        new = np.array([_middle(y[c:]) for c in cut])
-        diff = np.maximum(new[:, 0] - old[:, 1], 0.0) - np.maximum(old[:, 0] - new[:, 1], 0.0)
-        old, new = old.mean(1), new.mean(1)
-        best = int(np.argmax(np.abs(diff) * np.sqrt(cut * (n - cut))))
-        c = int(cut[best])
-        # The frames' transient spread about the two segments' medians (a step must not count as
-        # spread), and from successive differences, the larger. Slowly drifting errors make
-        # neighbouring frames alike: each segment holds fewer independent frames (lag-one
-        # autocorrelation of those residuals). The medians' standard errors are sqrt(pi / 2)
-        # times those of means.
-        r = y - np.where(np.arange(n) < c, old[best], new[best])
-        t = max(
-            (MAD_TO_SIGMA * np.median(np.abs(np.diff(y)))) ** 2 / 2.0,
-            (MAD_TO_SIGMA * np.median(np.abs(r))) ** 2,
-            1e-6,
-        )
-        rho = _lag_one(r) if n > 3 else 0.0
-        t *= (1.0 + rho) / (1.0 - rho)
-        # Judged against the frames' own uncertainty too: a few frames that err as much as
-        # they say they may are no step. The systematic budget both segments share (the same
-        # objects in the same scene) cancels in their difference; their noise and one
-        # segment's budget beyond the other's do not.
-        b_old, b_new = float(np.median(v[:c] - noise[:c])), float(np.median(v[c:] - noise[c:]))
-        t_old = max(t, float(np.median(noise[:c])) + max(b_old - b_new, 0.0))
-        t_new = max(t, float(np.median(noise[c:])) + max(b_new - b_old, 0.0))
-        z = abs(diff[best]) / np.sqrt(np.pi / 2 * (t_old / c + t_new / (n - c)))
-        if not (
-            z > self.options.change_sigma
-            and abs(diff[best]) > np.log1p(self.options.change_threshold)
-        ):
+        sigma, least = self.options.change_sigma, np.log1p(self.options.change_threshold)
+
+        def floor(c):
+            # A few frames that err as much as they say they may are no step. The systematic
+            # budget both segments share (the same objects in the same scene) cancels in their
+            # difference; their noise and one segment's budget beyond the other's do not.
+            b_old, b_new = np.median(v[:c] - noise[:c]), np.median(v[c:] - noise[c:])
+            return (float(np.median(noise[:c]) + max(b_old - b_new, 0.0)),
+                    float(np.median(noise[c:]) + max(b_new - b_old, 0.0)))
+
+        scale = _scale_track(rated)
+        c, step, z = _step(y, k, floor)
+        if z > sigma and abs(step) > least:
+            # A zoom moves the image scale by as much as the focal length; frames whose errors
+            # moved (a new view of the objects) leave it where it was.
+            hit = c if scale is None or _agrees(_difference(scale, c), step) else None
+        elif scale is not None:
+            # The image scale is told by pixels and depth alone, however the frames err: a step
+            # in it that the frames' focal lengths follow is a zoom, seen at once.
+            c, step, z = _step(scale, k, None)
+            seen = z > sigma and abs(step) > least and _agrees(_difference(y, c), step)
+            hit = c if seen else None
+        else:
+            hit = None
+        if hit is None:
             return False
-        first = rated[c]
+        if scale is not None:
+            hit = _first_of_new_scale(scale, hit)
+        first = rated[hit]
         while self._frames[0] is not first:
             self._frames.popleft()
         self.changes += 1
@@ -235,6 +241,91 @@ class FocalWindow:
         varies = max(spread2 * max(1.0 - np.sqrt(2.0 / n_eff), 0.0) - noise_var, 0.0)
         return max(budget - varies, 0.0) + max(spread2, noise_var) / n_eff
 
+
+
+def _log_extents(estimate: FocalEstimate) -> dict:
+    """{instance_id: log extent} of the estimate's objects with a positive, finite extent."""
+    return {
+        i: float(np.log(e))
+        for i, e in (getattr(estimate, "object_extents", None) or {}).items()
+        if np.isfinite(e) and e > 0
+    }
+
+
+def _scale_track(rated) -> np.ndarray | None:
+    """Each frame's image scale against the window's, in log: the median over its objects of
+    their log extent less that object's median over the window (objects are matched by
+    instance id, so objects coming and going do not move it). None unless every frame has one."""
+    seen = Counter(i for f in rated for i in f.extents)
+    ids = sorted(i for i, m in seen.items() if 2 * m >= len(rated))
+    if not ids or any(not any(i in f.extents for i in ids) for f in rated):
+        return None
+    col = {i: j for j, i in enumerate(ids)}
+    e = np.full((len(rated), len(ids)), np.nan)
+    for r, f in enumerate(rated):
+        for i, value in f.extents.items():
+            if i in col:
+                e[r, col[i]] = value
+    return np.nanmedian(e - np.nanmedian(e, axis=0), axis=1)
+
+
+def _step(y: np.ndarray, k: int, floor):
+    """The likeliest split of series y into older and newer values (at least k on each side):
+    (first newer index, signed step, step in standard errors). The standard error comes from
+    y's spread about the two segments' medians, at least ``floor(c)`` (older, newer) per value
+    when a floor is given."""
+    n = y.size
+    # Medians of the older and newer values for every split (a lone wild value moves neither);
+    # the most likely split is the one whose difference stands out most. An even segment's
+    # median is taken as whichever middle value lies nearer the other segment: a step needs
+    # most of a segment's values, not two wild ones among four.
+    cut = np.arange(k, n - k + 1)  # the first newer index
+    old = np.array([_middle(y[:c]) for c in cut])
+    new = np.array([_middle(y[c:]) for c in cut])
+    diff = np.maximum(new[:, 0] - old[:, 1], 0.0) - np.maximum(old[:, 0] - new[:, 1], 0.0)
+    old, new = old.mean(1), new.mean(1)
+    best = int(np.argmax(np.abs(diff) * np.sqrt(cut * (n - cut))))
+    c = int(cut[best])
+    # The transient spread about the two segments' medians (a step must not count as spread),
+    # and from successive differences, the larger. Slowly drifting errors make neighbouring
+    # values alike: each segment holds fewer independent values (lag-one autocorrelation of
+    # those residuals). The medians' standard errors are sqrt(pi / 2) times those of means.
+    r = y - np.where(np.arange(n) < c, old[best], new[best])
+    t = max(
+        (MAD_TO_SIGMA * np.median(np.abs(np.diff(y)))) ** 2 / 2.0,
+        (MAD_TO_SIGMA * np.median(np.abs(r))) ** 2,
+        1e-6,
+    )
+    rho = _lag_one(r) if n > 3 else 0.0
+    t *= (1.0 + rho) / (1.0 - rho)
+    t_old, t_new = (max(t, f) for f in floor(c)) if floor is not None else (t, t)
+    z = abs(diff[best]) / np.sqrt(np.pi / 2 * (t_old / c + t_new / (n - c)))
+    return c, float(diff[best]), float(z)
+
+
+def _difference(y: np.ndarray, c: int) -> float:
+    """The step of y at split c: its newer median less its older (of an even segment, the
+    middle value nearer the other segment)."""
+    old, new = _middle(y[:c]), _middle(y[c:])
+    return max(new[0] - old[1], 0.0) - max(old[0] - new[1], 0.0)
+
+
+def _agrees(other: float, step: float) -> bool:
+    """True when ``other`` moved the way ``step`` did by more than half as much: nearer a zoom
+    of that size than no zoom at all."""
+    return other * np.sign(step) > abs(step) / 2.0
+
+
+def _first_of_new_scale(scale: np.ndarray, c: int) -> int:
+    """The first frame of the trailing run of frames whose image scale lies nearer the newer
+    segment's than the older's: a median-based split may leave an older frame on the newer
+    side, and a clean scale says which."""
+    old, new = np.median(scale[:c]), np.median(scale[c:])
+    newer = np.abs(scale - new) < np.abs(scale - old)
+    first = scale.size
+    while first > 1 and newer[first - 1]:
+        first -= 1
+    return first if first < scale.size else c
 
 def _middle(y: np.ndarray) -> tuple[float, float]:
     """The lower and upper medians of y (equal for an odd count)."""
