@@ -187,6 +187,31 @@ def test_a_zoom_the_image_scale_shows_is_seen_at_once():
             assert changed_at == 27
 
 
+def test_instance_ids_that_do_not_follow_the_objects_leave_zooms_to_the_focal_lengths():
+    """A segmentation network that finds two to four of four objects of very different sizes
+    and numbers them anew in every frame: the image scale scatters and tells nothing. Over 40
+    sequences with a 20% zoom among frames with 3% noise, the window restarts exactly where it
+    does without extents (36 of 40 within 5 frames of the zoom, 43 restarts; judged without
+    asking whether the scale can tell a zoom, 29 of 40)."""
+
+    def run(seed, with_extents):
+        rng = np.random.default_rng(seed)
+        w = FocalWindow(WindowOptions(max_frames=30))
+        changed = []
+        for k in range(60):
+            zoom = 1.2 if k >= 30 else 1.0
+            sizes = rng.permutation([120.0, 60.0, 30.0, 15.0])[:rng.integers(2, 5)]
+            extents = {i + 1: e * zoom for i, e in enumerate(sizes)} if with_extents else None
+            e = estimate(600.0 * zoom * np.exp(rng.normal(0, 0.03)), 0.03, extents=extents)
+            if w.add(e, k / 30).changed:
+                changed.append(k)
+        return changed
+
+    shuffled = [run(seed, True) for seed in range(40)]
+    assert shuffled == [run(seed, False) for seed in range(40)]
+    assert sum(bool(c) and 30 <= c[0] <= 35 for c in shuffled) == 36
+
+
 def test_no_restart_on_static_sequences_with_outlier_frames():
     rng = np.random.default_rng(3)
     w = FocalWindow(WindowOptions(max_frames=30))

@@ -173,8 +173,11 @@ class FocalWindow:
         c, step, z = _step(y, k, floor)
         if z > sigma and abs(step) > least:
             # A zoom moves the image scale by as much as the focal length; frames whose errors
-            # moved (a new view of the objects) leave it where it was.
-            hit = c if scale is None or _agrees(_difference(scale, c), step) else None
+            # moved (a new view of the objects) leave it where it was. Judged only where the
+            # scale can tell the two apart (instance ids that do not follow the objects make
+            # it scatter).
+            tells = scale is not None and _telling(scale, c, step)
+            hit = c if not tells or _agrees(_difference(scale, c), step) else None
         elif scale is not None:
             # The image scale is told by pixels and depth alone, however the frames err: a step
             # in it that the frames' focal lengths follow is a zoom, seen at once.
@@ -185,7 +188,7 @@ class FocalWindow:
             hit = None
         if hit is None:
             return False
-        if scale is not None:
+        if scale is not None and _telling(scale, hit, _difference(scale, hit)):
             hit = _first_of_new_scale(scale, hit)
         first = rated[hit]
         while self._frames[0] is not first:
@@ -271,9 +274,7 @@ def _scale_track(rated) -> np.ndarray | None:
 
 def _step(y: np.ndarray, k: int, floor):
     """The likeliest split of series y into older and newer values (at least k on each side):
-    (first newer index, signed step, step in standard errors). The standard error comes from
-    y's spread about the two segments' medians, at least ``floor(c)`` (older, newer) per value
-    when a floor is given."""
+    (first newer index, signed step, step in standard errors, see :func:`_standard_error`)."""
     n = y.size
     # Medians of the older and newer values for every split (a lone wild value moves neither);
     # the most likely split is the one whose difference stands out most. An even segment's
@@ -283,14 +284,21 @@ def _step(y: np.ndarray, k: int, floor):
     old = np.array([_middle(y[:c]) for c in cut])
     new = np.array([_middle(y[c:]) for c in cut])
     diff = np.maximum(new[:, 0] - old[:, 1], 0.0) - np.maximum(old[:, 0] - new[:, 1], 0.0)
-    old, new = old.mean(1), new.mean(1)
     best = int(np.argmax(np.abs(diff) * np.sqrt(cut * (n - cut))))
     c = int(cut[best])
+    return c, float(diff[best]), float(abs(diff[best]) / _standard_error(y, c, floor))
+
+
+def _standard_error(y: np.ndarray, c: int, floor=None) -> float:
+    """Standard error of the step of y at split c, from y's spread about the two segments'
+    medians, at least ``floor(c)`` (older, newer) per value when a floor is given."""
+    n = y.size
+    old, new = np.mean(_middle(y[:c])), np.mean(_middle(y[c:]))
     # The transient spread about the two segments' medians (a step must not count as spread),
     # and from successive differences, the larger. Slowly drifting errors make neighbouring
     # values alike: each segment holds fewer independent values (lag-one autocorrelation of
     # those residuals). The medians' standard errors are sqrt(pi / 2) times those of means.
-    r = y - np.where(np.arange(n) < c, old[best], new[best])
+    r = y - np.where(np.arange(n) < c, old, new)
     t = max(
         (MAD_TO_SIGMA * np.median(np.abs(np.diff(y)))) ** 2 / 2.0,
         (MAD_TO_SIGMA * np.median(np.abs(r))) ** 2,
@@ -299,8 +307,14 @@ def _step(y: np.ndarray, k: int, floor):
     rho = _lag_one(r) if n > 3 else 0.0
     t *= (1.0 + rho) / (1.0 - rho)
     t_old, t_new = (max(t, f) for f in floor(c)) if floor is not None else (t, t)
-    z = abs(diff[best]) / np.sqrt(np.pi / 2 * (t_old / c + t_new / (n - c)))
-    return c, float(diff[best]), float(z)
+    return float(np.sqrt(np.pi / 2 * (t_old / c + t_new / (n - c))))
+
+
+def _telling(scale: np.ndarray, c: int, step: float) -> bool:
+    """True when the image scale at split c tells no zoom from a zoom of ``step``: the two lie
+    at least four of its standard errors apart, so the midpoint between them errs in few
+    cases either way."""
+    return _standard_error(scale, c) < abs(step) / 4.0
 
 
 def _difference(y: np.ndarray, c: int) -> float:
