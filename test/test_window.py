@@ -187,6 +187,24 @@ def test_a_zoom_the_image_scale_shows_is_seen_at_once():
             assert changed_at == 27
 
 
+def test_one_wild_image_scale_does_not_move_the_split_far():
+    """The zoom of test_a_zoom_the_image_scale_shows_is_seen_at_once with the objects' extents
+    of frame 21 (the second after the zoom) at the old scale: the window restarts at frame 22
+    with the three frames since the zoom. (Splitting at the trailing run of new-scale frames,
+    as 2cd06bf did, kept frame 22 alone.)"""
+    rng = np.random.default_rng(12)
+    w = FocalWindow(WindowOptions(max_frames=30))
+    restarts = []
+    for k in range(30):
+        zoom = 1.22 if k >= 20 else 1.0
+        f = 600.0 * zoom * np.exp(rng.normal(0, 0.06))
+        r = w.add(estimate(f, 0.10, std_rel_noise=0.01,
+                           extents=_scene(rng, 1.0 if k == 21 else zoom)), k / 30)
+        if r.changed:
+            restarts.append((k, r.frames))
+    assert restarts == [(22, 3)]
+
+
 def test_instance_ids_that_do_not_follow_the_objects_leave_zooms_to_the_focal_lengths():
     """A segmentation network that finds two to four of four objects of very different sizes
     and numbers them anew in every frame: the image scale scatters and tells nothing. Over 40

@@ -38,9 +38,12 @@ frame, the median over its objects of their log extent less that object's median
 (matched by instance id). Pixels and depth alone make it, so the frames' focal errors do not
 move it; a zoom moves it by the zoom. A step in the focal lengths stands only if the image scale
 moved the same way by more than half as much, and a step in the image scale (the same test,
-without a floor) that the focal lengths follow by more than half is a zoom at once. The split
-then moves to the first frame of the trailing run whose image scale is nearer the newer level.
-Frames without extents are judged by their focal lengths alone.
+without a floor) that the focal lengths follow by more than half is a zoom at once. The scale
+judges only where no zoom and that zoom lie four of its standard errors apart (instance ids
+that do not follow the objects make it scatter). The split then moves, by at most
+``change_frames``, to where the fewest frames lie on the side whose image scale they are
+further from. A window holding a frame without any of its objects' extents (hand-built
+estimates, or all objects cut by the image's edge) is judged by its focal lengths alone.
 
 A change of image size starts a new window. The settings are a :class:`WindowOptions`.
 """
@@ -169,27 +172,28 @@ class FocalWindow:
             return (float(np.median(noise[:c]) + max(b_old - b_new, 0.0)),
                     float(np.median(noise[c:]) + max(b_new - b_old, 0.0)))
 
-        scale = _scale_track(rated)
+        extents = _extent_matrix(rated)
+        scale = None if extents is None else _scale_track(extents)
+        hit = None
         c, step, z = _step(y, k, floor)
         if z > sigma and abs(step) > least:
             # A zoom moves the image scale by as much as the focal length; frames whose errors
             # moved (a new view of the objects) leave it where it was. Judged only where the
             # scale can tell the two apart (instance ids that do not follow the objects make
             # it scatter).
-            tells = scale is not None and _telling(scale, c, step)
-            hit = c if not tells or _agrees(_difference(scale, c), step) else None
-        elif scale is not None:
+            if scale is None or not _telling(scale, c, step) or _agrees(
+                    _difference(scale, c), step):
+                hit = c
+        if hit is None and scale is not None:
             # The image scale is told by pixels and depth alone, however the frames err: a step
             # in it that the frames' focal lengths follow is a zoom, seen at once.
-            c, step, z = _step(scale, k, None)
-            seen = z > sigma and abs(step) > least and _agrees(_difference(y, c), step)
-            hit = c if seen else None
-        else:
-            hit = None
+            c, moved, z = _step(scale, k, None)
+            if z > sigma and abs(moved) > least and _agrees(_difference(y, c), moved):
+                hit = c
         if hit is None:
             return False
         if scale is not None and _telling(scale, hit, _difference(scale, hit)):
-            hit = _first_of_new_scale(scale, hit)
+            hit = _split_by_scale(scale, hit, k)
         first = rated[hit]
         while self._frames[0] is not first:
             self._frames.popleft()
@@ -255,10 +259,10 @@ def _log_extents(estimate: FocalEstimate) -> dict:
     }
 
 
-def _scale_track(rated) -> np.ndarray | None:
-    """Each frame's image scale against the window's, in log: the median over its objects of
-    their log extent less that object's median over the window (objects are matched by
-    instance id, so objects coming and going do not move it). None unless every frame has one."""
+def _extent_matrix(rated) -> np.ndarray | None:
+    """Log extents of the frames' objects, (frames, objects) with NaN where a frame lacks one.
+    Objects are matched by instance id and kept if seen in at least half the frames; None
+    unless every frame has one of them."""
     seen = Counter(i for f in rated for i in f.extents)
     ids = sorted(i for i, m in seen.items() if 2 * m >= len(rated))
     if not ids or any(not any(i in f.extents for i in ids) for f in rated):
@@ -269,6 +273,12 @@ def _scale_track(rated) -> np.ndarray | None:
         for i, value in f.extents.items():
             if i in col:
                 e[r, col[i]] = value
+    return e
+
+
+def _scale_track(e: np.ndarray) -> np.ndarray:
+    """Each frame's image scale against the window's, in log: the median over its objects of
+    their log extent less that object's median over the window."""
     return np.nanmedian(e - np.nanmedian(e, axis=0), axis=1)
 
 
@@ -330,16 +340,20 @@ def _agrees(other: float, step: float) -> bool:
     return other * np.sign(step) > abs(step) / 2.0
 
 
-def _first_of_new_scale(scale: np.ndarray, c: int) -> int:
-    """The first frame of the trailing run of frames whose image scale lies nearer the newer
-    segment's than the older's: a median-based split may leave an older frame on the newer
-    side, and a clean scale says which."""
+def _split_by_scale(scale: np.ndarray, c: int, k: int) -> int:
+    """The split within k frames of c that leaves the fewest frames on the side whose image
+    scale they are further from (the nearest to c among equals): a median-based split may
+    leave an older frame on the newer side, and a clean scale says which, while one wild
+    frame cannot move the split far."""
+    n = scale.size
     old, new = np.median(scale[:c]), np.median(scale[c:])
-    newer = np.abs(scale - new) < np.abs(scale - old)
-    first = scale.size
-    while first > 1 and newer[first - 1]:
-        first -= 1
-    return first if first < scale.size else c
+    newer = (np.abs(scale - new) < np.abs(scale - old)).astype(int)
+    cuts = np.arange(max(1, c - k), min(n - 1, c + k) + 1)
+    before = np.concatenate([[0], np.cumsum(newer)])  # newer-looking frames before each cut
+    wrong = before[cuts] + (n - cuts) - (before[n] - before[cuts])
+    best = cuts[wrong == wrong.min()]
+    return int(best[np.argmin(np.abs(best - c))])
+
 
 def _middle(y: np.ndarray) -> tuple[float, float]:
     """The lower and upper medians of y (equal for an odd count)."""
