@@ -175,7 +175,9 @@ class FocalWindow:
         extents = _extent_matrix(rated)
         scale = None if extents is None else _scale_track(extents)
         hit = None
-        c, step, z = _step(y, k, floor)
+        # No step exceeds the series' range: a window whose frames all lie within
+        # change_threshold of each other needs no split search.
+        c, step, z = _step(y, k, floor) if np.ptp(y) > least else (k, 0.0, 0.0)
         if z > sigma and abs(step) > least:
             # A zoom moves the image scale by as much as the focal length; frames whose errors
             # moved (a new view of the objects) leave it where it was. Judged only where the
@@ -184,7 +186,7 @@ class FocalWindow:
             if scale is None or not _telling(scale, c, step) or _agrees(
                     _difference(scale, c), step):
                 hit = c
-        if hit is None and scale is not None:
+        if hit is None and scale is not None and np.ptp(scale) > least:
             # The image scale is told by pixels and depth alone, however the frames err: a step
             # in it that the frames' focal lengths follow is a zoom, seen at once.
             c, moved, z = _step(scale, k, None)
