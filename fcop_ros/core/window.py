@@ -251,12 +251,11 @@ class FocalWindow:
         return max(budget - varies, 0.0) + max(spread2, noise_var) / n_eff
 
 
-
 def _log_extents(estimate: FocalEstimate) -> dict:
     """{instance_id: log extent} of the estimate's objects with a positive, finite extent."""
     return {
         i: float(np.log(e))
-        for i, e in (getattr(estimate, "object_extents", None) or {}).items()
+        for i, e in estimate.object_extents.items()
         if np.isfinite(e) and e > 0
     }
 
@@ -293,9 +292,7 @@ def _step(y: np.ndarray, k: int, floor):
     # median is taken as whichever middle value lies nearer the other segment: a step needs
     # most of a segment's values, not two wild ones among four.
     cut = np.arange(k, n - k + 1)  # the first newer index
-    old = np.array([_middle(y[:c]) for c in cut])
-    new = np.array([_middle(y[c:]) for c in cut])
-    diff = np.maximum(new[:, 0] - old[:, 1], 0.0) - np.maximum(old[:, 0] - new[:, 1], 0.0)
+    diff = np.array([_difference(y, c) for c in cut])
     best = int(np.argmax(np.abs(diff) * np.sqrt(cut * (n - cut))))
     c = int(cut[best])
     return c, float(diff[best]), float(abs(diff[best]) / _standard_error(y, c, floor))
