@@ -36,6 +36,7 @@ bench: $(STAMP)
 	$(PY) bench/world_accuracy.py --frames 60
 	$(PY) bench/world_accuracy.py --frames 60 --heldout
 	$(PY) bench/world_accuracy.py --frames 60 --heldout2
+	$(PY) bench/world_accuracy.py --frames 60 --heldout3
 	$(PY) bench/world_calibration.py --frames 60
 	$(PY) bench/paper_simulation.py --out docs
 

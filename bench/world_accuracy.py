@@ -1,7 +1,7 @@
 """Accuracy, bias and honesty of the uncertainty on the randomised world, held-out beside tuned.
 
     python bench/world_accuracy.py [--frames 60] [--sequences 40] [--zoom-sequences 8]
-        [--heldout | --heldout2] [--parts single bias window preset_bias weights]
+        [--heldout | --heldout2 | --heldout3] [--parts single bias window preset_bias weights]
 
 Tuned rows use the seeds the estimator's few constants were chosen on (frames from seed 1000,
 sequences from seed 5000, the tuning error model). Held-out rows (--heldout) use seeds from
@@ -9,6 +9,9 @@ sequences from seed 5000, the tuning error model). Held-out rows (--heldout) use
 mask errors; see fcop_ros/synthetic/world.py), looked at once, at the end. After several
 rounds had looked at those, --heldout2 (seeds from 950000 and 955000, a third error model:
 Gaussian-bump depth fields, twisted NOCS, shifted masks) was first evaluated on 22 Nov 2026.
+--heldout3 (seeds from 980000 and 985000, a fourth error model: a depth error affine in
+disparity plus polynomial fields, the depth scale redrawn every frame, radially bulging NOCS,
+ragged masks) was fixed on 23 Nov 2026 and first evaluated at the end of that round.
 
 Single frames, per preset: median and p90 |focal error| (%), signed median (%), share of frames
 with an estimate, and for fcop_ros the coverage of |error| <= 2 std_rel; beside it the paper's
@@ -288,6 +291,8 @@ def main() -> None:
                       help="the held-out seeds and error model instead")
     held.add_argument("--heldout2", action="store_true",
                       help="the second held-out seeds and error model instead")
+    held.add_argument("--heldout3", action="store_true",
+                      help="the third held-out seeds and error model instead")
     ap.add_argument("--parts", nargs="+", default=["single", "bias", "window"],
                     choices=["single", "bias", "window", "preset_bias", "weights"],
                     help="preset_bias (not run by default): fcop_ros's signed median over "
@@ -305,6 +310,7 @@ def main() -> None:
     variant, frame_seed, seq_seed = (
         ("heldout", 900000, 905000) if args.heldout
         else ("heldout2", 950000, 955000) if args.heldout2
+        else ("heldout3", 980000, 985000) if args.heldout3
         else ("tuning", 1000, 5000)
     )
     print(

@@ -24,7 +24,13 @@ its mask errors with an elliptic kernel: a different error model with the same s
 After several rounds of development had looked at it, a second one (``variant="heldout2"``,
 first evaluated on 22 Nov 2026) builds its depth fields from Gaussian bumps, twists each
 object's NOCS about a random axis and shifts each instance's mask (a misregistered
-segmentation) instead of eroding or dilating it.
+segmentation) instead of eroding or dilating it. After two more rounds, a third
+(``variant="heldout3"``, fixed on 23 Nov 2026 before any of that round's choices and first
+evaluated at its end) errs as monocular depth networks do in ways the others do not: part of
+its depth field follows depth rather than the image (an error affine in disparity), the rest is
+a random polynomial of the image coordinates; the global depth scale is redrawn in every frame
+about the sequence's; each object's NOCS bulge or shrink radially; and each instance's boundary
+is ragged (pixels on either side of it flipped at random) rather than moved as a whole.
 """
 from __future__ import annotations
 
@@ -156,8 +162,22 @@ def _bump_field(rng, h, w, cells):
     return (out - out.mean()) / max(out.std(), 1e-9)
 
 
-VARIANTS = ("tuning", "heldout", "heldout2")
-_FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field}
+def _poly_field(rng, h, w, cells):
+    """A random polynomial of degree cells + 1 in the image coordinates (Legendre products,
+    aspect kept), zero mean and unit std."""
+    deg = cells + 1
+    c = rng.normal(size=(deg + 1, deg + 1))
+    c[np.add.outer(np.arange(deg + 1), np.arange(deg + 1)) > deg] = 0.0
+    c[0, 0] = 0.0
+    y = np.linspace(-1, 1, h) * h / max(h, w)
+    x = np.linspace(-1, 1, w) * w / max(h, w)
+    out = np.polynomial.legendre.leggrid2d(y, x, c)
+    return (out - out.mean()) / max(out.std(), 1e-9)
+
+
+VARIANTS = ("tuning", "heldout", "heldout2", "heldout3")
+_FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field,
+           "heldout3": _poly_field}
 
 
 @dataclass
@@ -191,6 +211,22 @@ class ErrorState:
             new = self.rho * old + np.sqrt(1 - self.rho ** 2) * new
         self.fields[key] = new
         return new
+
+    def _disparity(self, rng, depth):
+        """A relative depth error linear in depth over the frame (the first-order effect of a
+        shift of inverse depth), unit std over the finite pixels times a coefficient that
+        drifts as the fields do (unit variance)."""
+        b = rng.normal()
+        old = self.fields.get("disparity")
+        if old is not None:
+            b = self.rho * old + np.sqrt(1 - self.rho ** 2) * b
+        self.fields["disparity"] = b
+        ok = np.isfinite(depth)
+        g = np.zeros_like(depth)
+        if ok.sum() > 1:
+            d = depth[ok]
+            g[ok] = (d - d.mean()) / max(d.std(), 1e-9)
+        return b * g
 
     def _object(self, iid, rng):
         """Per-object errors: the shape mismatch persists, the relief error drifts slowly."""
@@ -248,15 +284,26 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
     if e.mask_px > 0:
         mask, nocs = _mask_errors(mask, nocs, e.mask_px, rng, state.variant)
         obj = mask > 0
-    depth = depth * state.scale + state.offset
+    scale = state.scale
+    if state.variant == "heldout3" and e.depth_scale > 0:
+        scale *= float(np.exp(rng.normal(0, e.depth_scale)))
+    depth = depth * scale + state.offset
     if e.field > 0:
-        total = sum(state._field(("depth", c), rng, h, w, c) for c in e.field_cells)
+        if state.variant == "heldout3":
+            # The coarsest scale follows depth (an error affine in disparity), the rest the
+            # image.
+            total = state._disparity(rng, depth) + sum(
+                state._field(("depth", c), rng, h, w, c) for c in e.field_cells[1:])
+        else:
+            total = sum(state._field(("depth", c), rng, h, w, c) for c in e.field_cells)
         depth *= 1.0 + e.field * total / np.sqrt(len(e.field_cells))
     if e.depth_pixel > 0:
         depth *= 1.0 + e.depth_pixel * rng.normal(size=(h, w))
     if e.nocs_field > 0:
         if state.variant == "heldout2":
             nocs = _twist(nocs, mask, state, rng, e.nocs_field)
+        elif state.variant == "heldout3":
+            nocs = _bulge(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout":
             # Scaled to ``nocs_field`` rms on the objects, as the other variants' distortions:
             # unscaled, q^T W q with |q| < 0.5 moved the NOCS 8x less than the tuning field.
@@ -309,11 +356,40 @@ def _twist(nocs, mask, state, rng, rms):
     return out
 
 
+def _bulge(nocs, mask, state, rng, rms):
+    """Each object's NOCS moved radially from the centre, outward where they are far from it
+    and inward where near (or the reverse, per object, for the whole sequence), scaled to
+    ``rms`` per NOCS axis: a NOCS network that stretches or squashes the extremes of the shape."""
+    out = nocs.copy()
+    for iid in np.unique(mask[mask > 0]):
+        m = mask == iid
+        sign = state.fields.get(("bulge", int(iid)))
+        if sign is None:
+            sign = float(rng.choice([-1.0, 1.0]))
+            state.fields[("bulge", int(iid))] = sign
+        q = nocs[m] - 0.5
+        r2 = np.sum(q * q, axis=1)
+        move = q * (r2 / max(r2.mean(), 1e-12) - 1.0)[:, None]
+        out[m] = nocs[m] + sign * rms * move / max(np.sqrt(np.mean(move ** 2)), 1e-9)
+    return out
+
+
+def _ragged(m, px, rng):
+    """Instance mask m with a ragged boundary: each pixel within r <= px of it (either side) is
+    flipped with one probability up to three quarters per instance."""
+    kern = cv2.getStructuringElement(cv2.MORPH_CROSS, (2 * px + 1,) * 2)
+    inner = m & ~cv2.erode(m.astype(np.uint8), kern).astype(bool)
+    outer = cv2.dilate(m.astype(np.uint8), kern).astype(bool) & ~m
+    p = rng.uniform(0.0, 0.75)
+    return (m & ~(inner & (rng.random(m.shape) < p))) | (outer & (rng.random(m.shape) < p))
+
+
 def _mask_errors(mask, nocs, px, rng, variant):
-    """Erode or dilate (``heldout2``: shift) each instance by up to ``px`` pixels; grown pixels
-    keep the background depth and take the nearest object's NOCS, as a segmentation network's
-    would."""
-    shape = cv2.MORPH_ELLIPSE if variant == "heldout" else cv2.MORPH_RECT
+    """Erode or dilate (``heldout2``: shift; ``heldout3``: fray) each instance by up to ``px``
+    pixels; grown pixels keep the background depth and take the nearest object's NOCS, as a
+    segmentation network's would."""
+    shape = {"heldout": cv2.MORPH_ELLIPSE, "heldout3": cv2.MORPH_CROSS}.get(variant,
+                                                                           cv2.MORPH_RECT)
     new = np.zeros_like(mask)
     near = np.stack([cv2.dilate(nocs[..., c].astype(np.float32),
                                 cv2.getStructuringElement(shape, (2 * px + 1,) * 2))
@@ -324,6 +400,8 @@ def _mask_errors(mask, nocs, px, rng, variant):
             dx, dy = (int(v) for v in rng.integers(-px, px + 1, 2))
             m = cv2.warpAffine(m, np.float32([[1, 0, dx], [0, 1, dy]]), m.shape[::-1],
                                flags=cv2.INTER_NEAREST)
+        elif variant == "heldout3":
+            m = _ragged(m.astype(bool), int(rng.integers(1, px + 1)), rng)
         elif r := int(rng.integers(-px, px + 1)):
             kern = cv2.getStructuringElement(shape, (2 * abs(r) + 1,) * 2)
             m = cv2.dilate(m, kern) if r > 0 else cv2.erode(m, kern)
