@@ -83,8 +83,27 @@ class FocalEstimate:
 
 def _extent(inst: Instance) -> float:
     """The instance's RMS image radius about its centroid (px) times its median depth (m)."""
+    if compiled.ENABLED and inst.x.dtype == np.float64 and inst.d.dtype == np.float64:
+        return float(_extent_kernel(np.ascontiguousarray(inst.x), inst.d))
     r = inst.x - inst.x.mean(0)
     return float(np.sqrt(np.mean(r[:, 0] ** 2 + r[:, 1] ** 2)) * np.median(inst.d))
+
+
+@compiled.kernel
+def _extent_kernel(x, d):
+    """``_extent`` in two passes over x and a selection of d's median (numpy's few calls on an
+    axis of two cost more than the arithmetic: 0.7 ms for a frame's five objects)."""
+    n = x.shape[0]
+    m0 = m1 = 0.0
+    for r in range(n):
+        m0 += x[r, 0]
+        m1 += x[r, 1]
+    m0, m1 = m0 / n, m1 / n
+    s = 0.0
+    for r in range(n):
+        u, v = x[r, 0] - m0, x[r, 1] - m1
+        s += u * u + v * v
+    return np.sqrt(s / n) * np.median(d)
 
 
 def _votes(instances: list[Instance], opt: EstimatorOptions, rng: np.random.Generator):
