@@ -280,7 +280,17 @@ def _extent_matrix(rated) -> np.ndarray | None:
 def _scale_track(e: np.ndarray) -> np.ndarray:
     """Each frame's image scale against the window's, in log: the median over its objects of
     their log extent less that object's median over the window."""
-    return np.nanmedian(e - np.nanmedian(e, axis=0), axis=1)
+    return _nanmedian(e - _nanmedian(e, 0)[None, :], 1)
+
+
+def _nanmedian(a: np.ndarray, axis: int) -> np.ndarray:
+    """``np.nanmedian(a, axis)`` of a 2-D array, to the bit, by one sort (NaN sort last): numpy's
+    goes through masked arrays at many times the cost. NaN where a line has no finite value."""
+    s = np.sort(a, axis=axis)
+    n = np.sum(~np.isnan(a), axis=axis)
+    lo = np.take_along_axis(s, np.expand_dims(np.maximum(n - 1, 0) // 2, axis), axis)
+    hi = np.take_along_axis(s, np.expand_dims(n // 2, axis), axis)
+    return np.where(n > 0, (lo + hi).squeeze(axis) / 2.0, np.nan)
 
 
 def _step(y: np.ndarray, k: int, floor):
@@ -292,7 +302,7 @@ def _step(y: np.ndarray, k: int, floor):
     # median is taken as whichever middle value lies nearer the other segment: a step needs
     # most of a segment's values, not two wild ones among four.
     cut = np.arange(k, n - k + 1)  # the first newer index
-    diff = np.array([_difference(y, c) for c in cut])
+    diff = _differences(y, cut)
     best = int(np.argmax(np.abs(diff) * np.sqrt(cut * (n - cut))))
     c = int(cut[best])
     return c, float(diff[best]), float(abs(diff[best]) / _standard_error(y, c, floor))
@@ -331,6 +341,19 @@ def _difference(y: np.ndarray, c: int) -> float:
     middle value nearer the other segment)."""
     old, new = _middle(y[:c]), _middle(y[c:])
     return max(new[0] - old[1], 0.0) - max(old[0] - new[1], 0.0)
+
+
+def _differences(y: np.ndarray, cut: np.ndarray) -> np.ndarray:
+    """:func:`_difference` of y at every split in ``cut``, to the bit: each split's older and
+    newer values sorted at once, padded with +inf."""
+    n = y.size
+    j = np.arange(n)
+    older = np.sort(np.where(j < cut[:, None], y, np.inf), axis=1)
+    newer = np.sort(np.where(j >= cut[:, None], y, np.inf), axis=1)
+    rows, m = np.arange(cut.size), n - cut
+    old_lo, old_hi = older[rows, (cut - 1) // 2], older[rows, cut // 2]
+    new_lo, new_hi = newer[rows, (m - 1) // 2], newer[rows, m // 2]
+    return np.maximum(new_lo - old_hi, 0.0) - np.maximum(old_lo - new_hi, 0.0)
 
 
 def _agrees(other: float, step: float) -> bool:
