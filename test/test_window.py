@@ -187,6 +187,27 @@ def test_a_zoom_the_image_scale_shows_is_seen_at_once():
             assert changed_at == 27
 
 
+def test_frames_without_extents_are_skipped_by_the_image_scale():
+    """The zoom of test_a_zoom_the_image_scale_shows_is_seen_at_once with every fifth frame
+    without extents (all its objects cut by the image's edge), the first after the zoom among
+    them: the scale still shows the zoom at its third frame (frame 22), and the window
+    restarts at the first frame after the zoom that has extents (frame 21; frame 20 goes with
+    the older frames). When one such frame turned the scale off for the whole window, the
+    focal lengths alone saw the zoom at frame 31 (keeping 13 frames, one of them older)."""
+    rng = np.random.default_rng(10)
+    w = FocalWindow(WindowOptions(max_frames=30))
+    restarts = []
+    for k in range(40):
+        zoom = 1.22 if k >= 20 else 1.0
+        f = 600.0 * zoom * np.exp(rng.normal(0, 0.06))
+        extents = _scene(rng, zoom)
+        r = w.add(estimate(f, 0.10, std_rel_noise=0.01, extents=None if k % 5 == 0 else extents),
+                  k / 30)
+        if r.changed:
+            restarts.append((k, r.frames))
+    assert restarts == [(22, 2)]
+
+
 def test_one_wild_image_scale_does_not_move_the_split_far():
     """The zoom of test_a_zoom_the_image_scale_shows_is_seen_at_once with the objects' extents
     of frame 21 (the second after the zoom) at the old scale: the window restarts at frame 22

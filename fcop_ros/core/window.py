@@ -42,8 +42,10 @@ without a floor) that the focal lengths follow by more than half is a zoom at on
 judges only where no zoom and that zoom lie four of its standard errors apart (instance ids
 that do not follow the objects make it scatter). The split then moves, by at most
 ``change_frames``, to where the fewest frames lie on the side whose image scale they are
-further from. A window holding a frame without any of its objects' extents (hand-built
-estimates, or all objects cut by the image's edge) is judged by its focal lengths alone.
+further from. Frames without any of the window's objects' extents (hand-built estimates, or
+all objects cut by the image's edge) are skipped in the scale: it judges a split only with
+``change_frames`` frames of its own on either side, and a split it finds starts at its first
+newer frame.
 
 A change of image size starts a new window. The settings are a :class:`WindowOptions`.
 """
@@ -172,8 +174,19 @@ class FocalWindow:
             return (float(np.median(noise[:c]) + max(b_old - b_new, 0.0)),
                     float(np.median(noise[c:]) + max(b_new - b_old, 0.0)))
 
-        extents = _extent_matrix(rated)
-        scale = None if extents is None else _scale_track(extents)
+        scale, at = _scale_track(rated)
+        if scale is not None and scale.size < 2 * k:
+            scale = None
+
+        def judged(c):
+            # The scale's split for the frames' split c, where change_frames frames with a
+            # scale lie on either side of it (frames without one, e.g. all objects cut by the
+            # image's edge, are skipped).
+            if scale is None:
+                return None
+            cs = int(np.searchsorted(at, c))
+            return cs if k <= cs <= scale.size - k else None
+
         hit = None
         # No step exceeds the series' range: a window whose frames all lie within
         # change_threshold of each other needs no split search.
@@ -183,19 +196,23 @@ class FocalWindow:
             # moved (a new view of the objects) leave it where it was. Judged only where the
             # scale can tell the two apart (instance ids that do not follow the objects make
             # it scatter).
-            if scale is None or not _telling(scale, c, step) or _agrees(
-                    _difference(scale, c), step):
+            cs = judged(c)
+            if cs is None or not _telling(scale, cs, step) or _agrees(
+                    _difference(scale, cs), step):
                 hit = c
         if hit is None and scale is not None and np.ptp(scale) > least:
             # The image scale is told by pixels and depth alone, however the frames err: a step
-            # in it that the frames' focal lengths follow is a zoom, seen at once.
-            c, moved, z = _step(scale, k, None)
+            # in it that the frames' focal lengths follow is a zoom, seen at once. The newer
+            # side starts at its first frame with a scale.
+            cs, moved, z = _step(scale, k, None)
+            c = int(at[cs])
             if z > sigma and abs(moved) > least and _agrees(_difference(y, c), moved):
                 hit = c
         if hit is None:
             return False
-        if scale is not None and _telling(scale, hit, _difference(scale, hit)):
-            hit = _split_by_scale(scale, hit, k)
+        cs = judged(hit)
+        if cs is not None and _telling(scale, cs, _difference(scale, cs)):
+            hit = int(at[_split_by_scale(scale, cs, k)])
         first = rated[hit]
         while self._frames[0] is not first:
             self._frames.popleft()
@@ -260,27 +277,35 @@ def _log_extents(estimate: FocalEstimate) -> dict:
     }
 
 
-def _extent_matrix(rated) -> np.ndarray | None:
-    """Log extents of the frames' objects, (frames, objects) with NaN where a frame lacks one.
-    Objects are matched by instance id and kept if seen in at least half the frames; None
-    unless every frame has one of them."""
-    seen = Counter(i for f in rated for i in f.extents)
-    ids = sorted(i for i, m in seen.items() if 2 * m >= len(rated))
-    if not ids or any(not any(i in f.extents for i in ids) for f in rated):
+def _extent_matrix(rated) -> tuple[np.ndarray, np.ndarray] | None:
+    """Log extents of the frames' objects, (frames with any, objects) with NaN where a frame
+    lacks one, and those frames' indices in ``rated``. Objects are matched by instance id and
+    kept if seen in at least half the frames that carry extents; frames with none of them are
+    left out. None without any."""
+    carry = [f.extents for f in rated]
+    seen = Counter(i for x in carry for i in x)
+    ids = sorted(i for i, m in seen.items() if 2 * m >= sum(1 for x in carry if x))
+    at = np.array([r for r, x in enumerate(carry) if any(i in x for i in ids)], dtype=int)
+    if not at.size:
         return None
     col = {i: j for j, i in enumerate(ids)}
-    e = np.full((len(rated), len(ids)), np.nan)
-    for r, f in enumerate(rated):
-        for i, value in f.extents.items():
+    e = np.full((at.size, len(ids)), np.nan)
+    for row, r in enumerate(at):
+        for i, value in carry[r].items():
             if i in col:
-                e[r, col[i]] = value
-    return e
+                e[row, col[i]] = value
+    return e, at
 
 
-def _scale_track(e: np.ndarray) -> np.ndarray:
-    """Each frame's image scale against the window's, in log: the median over its objects of
-    their log extent less that object's median over the window."""
-    return _nanmedian(e - _nanmedian(e, 0)[None, :], 1)
+def _scale_track(rated) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The frames' image scale against the window's, in log, and the indices in ``rated`` of
+    the frames it has: per frame, the median over its objects of their log extent less that
+    object's median over the window. (None, None) without extents."""
+    m = _extent_matrix(rated)
+    if m is None:
+        return None, None
+    e, at = m
+    return _nanmedian(e - _nanmedian(e, 0)[None, :], 1), at
 
 
 def _nanmedian(a: np.ndarray, axis: int) -> np.ndarray:
