@@ -165,26 +165,28 @@ def test_a_focal_step_the_image_scale_does_not_follow_is_no_zoom():
         assert w.changes == (0 if with_extents else 1)
 
 
+def _zoom_restarts(seed, n, extents):
+    """(frame, frames kept) at each restart over n frames of a 22% zoom at frame 20, frames
+    scattering by 6% (std_rel 10%, noise 1%); ``extents(k, zoom, rng)`` gives frame k's."""
+    rng = np.random.default_rng(seed)
+    w = FocalWindow(WindowOptions(max_frames=30))
+    restarts = []
+    for k in range(n):
+        zoom = 1.22 if k >= 20 else 1.0
+        f = 600.0 * zoom * np.exp(rng.normal(0, 0.06))
+        r = w.add(estimate(f, 0.10, std_rel_noise=0.01, extents=extents(k, zoom, rng)), k / 30)
+        if r.changed:
+            restarts.append((k, r.frames))
+    return restarts
+
+
 def test_a_zoom_the_image_scale_shows_is_seen_at_once():
     """Frames that scatter by 6% (std_rel 10%) through a 22% zoom: their focal lengths alone
     stand out at the eighth frame after it (frame 27); the objects' extents, which move by the
     zoom, show it at the second (frame 21), and the window restarts at the zoom itself (the
     median split there keeps one older frame)."""
-    for with_extents in (True, False):
-        rng = np.random.default_rng(10)
-        w = FocalWindow(WindowOptions(max_frames=30))
-        changed_at, frames_after = None, None
-        for k in range(40):
-            zoom = 1.22 if k >= 20 else 1.0
-            f = 600.0 * zoom * np.exp(rng.normal(0, 0.06))
-            r = w.add(estimate(f, 0.10, std_rel_noise=0.01,
-                               extents=_scene(rng, zoom) if with_extents else None), k / 30)
-            if r.changed and changed_at is None:
-                changed_at, frames_after = k, r.frames
-        if with_extents:
-            assert changed_at == 21 and frames_after == 2
-        else:
-            assert changed_at == 27
+    assert _zoom_restarts(10, 40, lambda k, zoom, rng: _scene(rng, zoom))[0] == (21, 2)
+    assert _zoom_restarts(10, 40, lambda k, zoom, rng: None)[0][0] == 27
 
 
 def test_frames_without_extents_are_skipped_by_the_image_scale():
@@ -194,18 +196,11 @@ def test_frames_without_extents_are_skipped_by_the_image_scale():
     restarts at the first frame after the zoom that has extents (frame 21; frame 20 goes with
     the older frames). When one such frame turned the scale off for the whole window, the
     focal lengths alone saw the zoom at frame 31 (keeping 13 frames, one of them older)."""
-    rng = np.random.default_rng(10)
-    w = FocalWindow(WindowOptions(max_frames=30))
-    restarts = []
-    for k in range(40):
-        zoom = 1.22 if k >= 20 else 1.0
-        f = 600.0 * zoom * np.exp(rng.normal(0, 0.06))
+    def every_fifth_cut(k, zoom, rng):
         extents = _scene(rng, zoom)
-        r = w.add(estimate(f, 0.10, std_rel_noise=0.01, extents=None if k % 5 == 0 else extents),
-                  k / 30)
-        if r.changed:
-            restarts.append((k, r.frames))
-    assert restarts == [(22, 2)]
+        return None if k % 5 == 0 else extents
+
+    assert _zoom_restarts(10, 40, every_fifth_cut) == [(22, 2)]
 
 
 def test_one_wild_image_scale_does_not_move_the_split_far():
@@ -213,16 +208,7 @@ def test_one_wild_image_scale_does_not_move_the_split_far():
     of frame 21 (the second after the zoom) at the old scale: the window restarts at frame 22
     with the three frames since the zoom. (Splitting at the trailing run of new-scale frames,
     as 2cd06bf did, kept frame 22 alone.)"""
-    rng = np.random.default_rng(12)
-    w = FocalWindow(WindowOptions(max_frames=30))
-    restarts = []
-    for k in range(30):
-        zoom = 1.22 if k >= 20 else 1.0
-        f = 600.0 * zoom * np.exp(rng.normal(0, 0.06))
-        r = w.add(estimate(f, 0.10, std_rel_noise=0.01,
-                           extents=_scene(rng, 1.0 if k == 21 else zoom)), k / 30)
-        if r.changed:
-            restarts.append((k, r.frames))
+    restarts = _zoom_restarts(12, 30, lambda k, zoom, rng: _scene(rng, 1.0 if k == 21 else zoom))
     assert restarts == [(22, 3)]
 
 
