@@ -136,3 +136,51 @@ def test_make_bag_cli_compression_default_and_errors(tmp_path, capsys):
     assert next((tmp_path / "b").glob("*.mcap")).stat().st_size > 0
     assert mb.main([str(tmp_path / "b"), "--frames", "1"]) == 2
     assert "exists" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--focal", "-5"], "focal must be a positive number of pixels, got -5.0"),
+    (["--focal", "0"], "focal must be a positive number of pixels, got 0.0"),
+    (["--focal", "nan"], "focal must be a positive number of pixels, got nan"),
+    (["--rate", "0"], "--rate must be a positive number of frames per second, got 0.0"),
+    (["--rate", "-3"], "--rate must be a positive number of frames per second, got -3.0"),
+    (["--zoom-frame", "10", "--zoom-focal", "700"], "the zoom frame 10 is not one of the 4"),
+    (["--zoom-frame", "2", "--zoom-focal", "-1"], "zoom focal must be a positive number"),
+    (["--objects", "0"], "need at least one frame, one object"),
+])
+def test_make_bag_refuses_what_it_cannot_render_in_one_line(tmp_path, capsys, args, said):
+    """Exit 2, one line naming the value, and no bag left behind (each of these used to end in
+    a traceback, some after writing part of a bag, or to write a bag without the zoom)."""
+    assert mb.main([str(tmp_path / "b"), "--frames", "4"] + args) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("fcop_make_bag: ") and said in err and err.count("\n") == 1
+    assert not (tmp_path / "b").exists()
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--focal", "0"], "focal must be a positive number of pixels, got 0.0"),
+    (["--frames", "0"], "need at least one frame"),
+    (["--out", "FILE"], "exists and is not a directory"),
+])
+def test_demo_refuses_unusable_arguments_in_one_line(tmp_path, capsys, args, said):
+    (tmp_path / "FILE").write_text("")
+    args = [str(tmp_path / "FILE") if a == "FILE" else a for a in args]
+    out = [] if "--out" in args else ["--out", str(tmp_path / "demo")]
+    assert demo.main(out + args) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("fcop_demo: ") and said in err and err.count("\n") == 1
+    assert not (tmp_path / "demo").exists()
+
+
+def test_replay_says_which_options_its_mode_ignores(tmp_path, capsys):
+    """Play-only options in an offline replay, and offline-only ones with --play, are named on
+    one line (then the replay goes on: here it stops at the missing bag, exit 2)."""
+    topics = ["--depth-topic", "/d", "--nocs-topic", "/n", "--mask-topic", "/m"]
+    assert rp.main([str(tmp_path / "none")] + topics + ["--loop", "--rate", "0.1"]) == 2
+    assert "fcop_replay: --rate, --loop apply only with --play: ignored" in capsys.readouterr().err
+    assert rp.main([str(tmp_path / "none")] + topics + ["--play", "--out", "x", "-p",
+                                                        "seed:=1"]) == 2
+    err = capsys.readouterr().err
+    assert "fcop_replay: --out, -p apply only without --play: ignored" in err
+    assert rp.main([str(tmp_path / "none")] + topics) == 2
+    assert "ignored" not in capsys.readouterr().err

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .noise import apply_noise
+from .noise import PRESETS, apply_noise
 from .render import Frame, SceneObject, random_scene, render
 
 
@@ -25,6 +25,22 @@ class SequenceSpec:
     preset: str = "moderate"
     objects: int = 5
     orbit_deg_per_frame: float = 0.5
+
+    def __post_init__(self):
+        if self.frames < 1 or self.width < 8 or self.height < 8 or self.objects < 1:
+            raise ValueError("need at least one frame, one object and an image of 8x8 or more")
+        for name in ("focal", "zoom_focal"):
+            v = getattr(self, name)
+            if v is not None and not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name.replace('_', ' ')} must be a positive number of "
+                                 f"pixels, got {v}")
+        if (self.zoom_frame is None) != (self.zoom_focal is None):
+            raise ValueError("a zoom needs both its frame and its focal length")
+        if self.zoom_frame is not None and not 0 <= self.zoom_frame < self.frames:
+            raise ValueError(f"the zoom frame {self.zoom_frame} is not one of the "
+                             f"{self.frames} frames")
+        if self.preset not in PRESETS:
+            raise ValueError(f"unknown noise preset {self.preset!r}: one of {sorted(PRESETS)}")
 
     def focal_at(self, k: int) -> float:
         if self.zoom_frame is not None and self.zoom_focal is not None and k >= self.zoom_frame:

@@ -18,7 +18,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="fcop_demo", description=__doc__,
                                  formatter_class=HelpFormatter,
                                  epilog="exit codes:\n  0   done\n  1   nothing was estimated\n"
-                                        "  2   the bag or the outputs could not be written")
+                                        "  2   unusable arguments, or the bag or the outputs "
+                                        "could not be written")
     ap.add_argument("--out", default="out/demo",
                     help="directory for the bag and the replay outputs")
     ap.add_argument("--frames", type=int, default=60, help="number of frames (640x480 at 30 Hz)")
@@ -39,12 +40,18 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     out = Path(args.out)
     bag = out / "input_bag"
-    if bag.exists():
-        shutil.rmtree(bag)
-    out.mkdir(parents=True, exist_ok=True)
     zoom_frame = (2 * args.frames) // 3
-    spec = SequenceSpec(args.frames, 640, 480, args.focal, zoom_frame, args.zoom_focal,
-                        args.preset)
+    try:
+        spec = SequenceSpec(args.frames, 640, 480, args.focal, zoom_frame, args.zoom_focal,
+                            args.preset)
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"--out {out} exists and is not a directory")
+        if bag.exists():
+            shutil.rmtree(bag)
+        out.mkdir(parents=True, exist_ok=True)
+    except (ValueError, OSError) as exc:
+        print(f"fcop_demo: {exc}", file=sys.stderr)
+        return 2
     print(f"1/2 writing a synthetic bag: {args.frames} frames 640x480 at 30 Hz, 5 objects, "
           f"noise preset '{args.preset}', true focal {args.focal:.0f} px, zoom to "
           f"{args.zoom_focal:.0f} px at frame {zoom_frame}")

@@ -10,6 +10,7 @@ reads them; --compression none writes them plain.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 
@@ -61,7 +62,8 @@ def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0,
 
 EXIT_CODES_TEXT = """exit codes:
   0   done
-  2   unusable arguments (the bag exists, a bad size or zoom) or the bag cannot be written
+  2   unusable arguments (the bag exists; a bad size, focal length, rate or zoom) or the
+      bag cannot be written
   130 interrupted (Ctrl-C); the partial bag is left behind"""
 
 
@@ -102,11 +104,16 @@ def main(argv=None) -> int:
     if (args.zoom_frame is None) != (args.zoom_focal is None):
         print("fcop_make_bag: --zoom-frame and --zoom-focal go together", file=sys.stderr)
         return 2
-    if args.frames < 1 or args.width < 8 or args.height < 8:
-        print("fcop_make_bag: need --frames >= 1 and an image of at least 8x8", file=sys.stderr)
+    if not (math.isfinite(args.rate) and args.rate > 0):
+        print(f"fcop_make_bag: --rate must be a positive number of frames per second, got "
+              f"{args.rate}", file=sys.stderr)
         return 2
-    spec = SequenceSpec(args.frames, args.width, args.height, args.focal, args.zoom_frame,
-                        args.zoom_focal, args.preset, args.objects)
+    try:
+        spec = SequenceSpec(args.frames, args.width, args.height, args.focal, args.zoom_frame,
+                            args.zoom_focal, args.preset, args.objects)
+    except ValueError as exc:
+        print(f"fcop_make_bag: {exc}", file=sys.stderr)
+        return 2
     bar = None
     if sys.stderr.isatty():
         from tqdm import tqdm

@@ -128,8 +128,27 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+# The options of one mode, by their argparse names, as typed.
+PLAY_ONLY = {"rate": "--rate", "loop": "--loop", "clock": "--no-clock", "clock_hz": "--clock-hz",
+             "wait_subscribers": "--wait-subscribers"}
+OFFLINE_ONLY = {"truth_topic": "--truth-topic", "out": "--out", "params_file": "--params-file",
+                "overrides": "-p", "out_storage": "--out-storage"}
+
+
+def _ignored(ap: argparse.ArgumentParser, args) -> list[str]:
+    """The options given that the chosen mode does not use."""
+    names = OFFLINE_ONLY if args.play else PLAY_ONLY
+    return [flag for name, flag in names.items() if getattr(args, name) != ap.get_default(name)]
+
+
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    ignored = _ignored(ap, args)
+    if ignored:
+        print(f"fcop_replay: {', '.join(ignored)} "
+              f"{'apply' if len(ignored) > 1 else 'applies'} only "
+              f"{'without' if args.play else 'with'} --play: ignored", file=sys.stderr)
     try:
         if args.play:
             res = play(
