@@ -232,3 +232,17 @@ def test_object_extents_follow_a_zoom_and_leave_out_cut_objects():
                                  for i in common]))
     assert abs(np.median(ratios) - 1.25) < 0.03
     assert 1.1 < min(ratios) and max(ratios) < 1.35
+
+
+def test_nocs_in_0_255_are_named_as_the_reason():
+    """NOCS as 8-bit values (0..255) leave no usable pixel (every one lies outside [0, 1]); the
+    reason says so instead of reading like empty masks. NOCS in [0, 1] never get the hint."""
+    fr = clean_frame(0)
+    est = estimate_focal(fr.depth, fr.nocs * 255.0, fr.mask, seed=0, poses=False)
+    assert est.focal is None
+    assert est.reason.startswith("no instance with >= 50 valid pixels (NOCS values reach 2")
+    assert "they must lie in [0, 1]: divide 8-bit NOCS by 255" in est.reason
+    small = np.zeros_like(fr.mask)
+    small[:5, :5] = 1  # too few pixels, valid NOCS
+    est = estimate_focal(fr.depth, fr.nocs, small, seed=0, poses=False)
+    assert est.reason == "no instance with >= 50 valid pixels"

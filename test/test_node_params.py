@@ -101,6 +101,24 @@ def test_bad_qos_override_in_process_raises_parameter_error():
             "parameter qos_overrides./mask.subscription.history='forever' is not allowed: one of"
         )
 
+def test_a_parameter_the_node_does_not_have_is_named(harness, capfd):
+    """rclpy ignores an override of an undeclared parameter without a word; the node names it
+    and the likely intended one, and runs with its defaults."""
+    h = harness(node_args=["--ros-args", "-p", "window_frame:=5", "-p", "max_uncertanty:=0.2",
+                           "-p", "qos_overrides./nope.subscription.depth:=3"])
+    assert h.node.p["window_frames"] == 30
+    err = capfd.readouterr().err
+    assert "parameter window_frame is not one of this node's; ignored (did you mean " \
+        "window_frames?)" in err
+    assert "parameter max_uncertanty is not one of this node's; ignored (did you mean " \
+        "max_uncertainty?)" in err
+    assert "parameter qos_overrides./nope.subscription.depth is not one of this node's" in err
+    assert err.count("is not one of this node's") == 3
+    h = harness(node_args=["--ros-args", "-p", "use_sim_time:=false", "-p",
+                           "qos_overrides./depth.subscription.depth:=3", "-p", "seed:=4"])
+    assert "is not one of this node's" not in capfd.readouterr().err
+
+
 def test_integer_for_a_float_parameter_is_taken(harness):
     # `-p focal_min:=300` is what people type; rclpy alone refuses an INTEGER for a DOUBLE.
     h = harness(node_args=["--ros-args", "-p", "focal_min:=300"])
@@ -123,12 +141,16 @@ def check_window_frames(h):
     frames_then(h, 3)
     set_ok(h, window_frames=2)
     assert len(h.node.window) == 2 and h.node.window.current.focal is not None  # evidence kept
+    set_ok(h, window_frames=30)  # grown again: the frame the smaller window left comes back
+    assert len(h.node.window) == 3
 
 
 def check_window_seconds(h):
     frames_then(h, 3)  # 33 ms apart
     set_ok(h, window_seconds=0.05)
     assert len(h.node.window) == 2 and h.node.window.current.focal is not None
+    set_ok(h, window_seconds=0.0)
+    assert len(h.node.window) == 3
 
 
 def check_min_frames(h):

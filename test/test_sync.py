@@ -85,6 +85,10 @@ def test_dropped_and_duplicate_stamps():
     assert sync.stats.dropped["duplicate"] == 1
     assert sync.stats.dropped["unmatched"] == 2  # depth and nocs of frame 2
     assert sync.pending() == 0
+    # A frame sent again after its set went out: duplicates too, not late messages (a stamp
+    # between the sets, never used, is late).
+    assert run(sync, [(0, 1 * MS), (1, 3 * MS), (2, 3 * MS), (0, 2 * MS)]) == []
+    assert sync.stats.dropped["duplicate"] == 4 and sync.stats.dropped["late"] == 1
 
 
 def test_approximate_matching_with_slop():

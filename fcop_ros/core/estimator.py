@@ -106,6 +106,18 @@ def _extent_kernel(x, d):
     return np.sqrt(s / n) * np.median(d)
 
 
+def _no_instance_reason(nocs, mask, opt: EstimatorOptions) -> str:
+    """Why no instance was usable, naming NOCS given in 0..255 instead of [0, 1] (a common
+    slip that otherwise reads as empty masks)."""
+    reason = f"no instance with >= {opt.min_object_pixels} valid pixels"
+    on = nocs[mask > 0]
+    top = float(np.max(on, initial=0.0, where=np.isfinite(on)))
+    if top > 1.5:
+        reason += (f" (NOCS values reach {top:.4g} on the objects; they must lie in [0, 1]: "
+                   "divide 8-bit NOCS by 255)")
+    return reason
+
+
 def _votes(instances: list[Instance], opt: EstimatorOptions, rng: np.random.Generator):
     """Minimal-solver votes of every object, solved in one call: (focal (V,), owner index (V,))."""
     return object_votes([inst.x for inst in instances], [inst.d for inst in instances],
@@ -340,9 +352,7 @@ def estimate_focal(
         rng=rng,
     )
     if not instances:
-        return FocalEstimate(
-            None, reason=f"no instance with >= {opt.min_object_pixels} valid pixels", **base
-        )
+        return FocalEstimate(None, reason=_no_instance_reason(nocs, mask, opt), **base)
     base["instances_skipped"] = getattr(instances, "skipped", 0)
 
     if opt.method == "ransac":

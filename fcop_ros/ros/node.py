@@ -12,6 +12,7 @@ publishing never waits for the estimator, and the estimator never works on a bac
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import os
 import re
 import sys
@@ -209,9 +210,14 @@ class FcopNode(Node):
             before=self._warm_up_kernels,
         )
         self._warming_up = True  # until the worker has its kernels (see _warm_up_kernels)
+        self.warm_up_seconds = 0.0  # what preparing them took (replay's throughput leaves it out)
         self._size = None  # (width, height) of the frames in the window
         self._estimate: _Publishable | None = None
-        self._history: deque = deque()  # the window's frames, light, to re-evaluate later
+        # The window's frames since its last restart, light, to re-evaluate later: as many as
+        # the largest window_frames set so far, so that a window shrunk and grown again gets
+        # its frames back.
+        self._history: deque = deque()
+        self._history_cap = 0
         self._last_objects: list = []
         self._answered: OrderedDict = OrderedDict()  # depth stamps that got their CameraInfo
         self._unanswered: OrderedDict = OrderedDict()  # depth stamps that came before an estimate
@@ -239,6 +245,7 @@ class FcopNode(Node):
         self._diag_timer = self.create_timer(
             float(self.p["diagnostics_period"]), self.publish_diagnostics
         )
+        self._warn_unknown_overrides()
         self.worker.start()
         self.get_logger().info(
             f"fcop_node ready: inputs {[s.topic_name for s in self._subs]}, camera_info_in "
@@ -315,6 +322,17 @@ class FcopNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
 
     # ----- parameters
+    def _warn_unknown_overrides(self) -> None:
+        """Name each parameter given (``-p``, a params file) that the node does not have: rclpy
+        ignores it without a word, and a misspelt name would leave its default in force."""
+        for name in sorted(getattr(self, "_parameter_overrides", {})):
+            if not self.has_parameter(name):
+                close = difflib.get_close_matches(name, list(PARAMETERS), n=1)
+                self.get_logger().warning(
+                    f"fcop_node: parameter {name} is not one of this node's; ignored"
+                    + (f" (did you mean {close[0]}?)" if close else "")
+                )
+
     def _declare_parameters(self) -> None:
         """Declare every parameter with its descriptor (rclpy refuses a wrong type or range, turned
         into one ParameterError line), then check what descriptors cannot say."""
@@ -384,6 +402,7 @@ class FcopNode(Node):
         frames = list(self._history) if keep else []
         self.window = FocalWindow(window_options(self.p))
         self._history = deque()
+        self._history_cap = max(self._history_cap, self.p["window_frames"])
         for est, t in frames:
             self._add_to_window(est, t)
         self._update_estimate_locked(self.window.current)
@@ -391,7 +410,8 @@ class FcopNode(Node):
     def _add_to_window(self, est, t: float):
         win = self.window.add(est, t)
         self._history.append((est, t))
-        while len(self._history) > len(self.window):
+        keep = len(self.window) if win.changed else max(len(self.window), self._history_cap)
+        while len(self._history) > keep:
             self._history.popleft()
         return win
 
@@ -488,6 +508,7 @@ class FcopNode(Node):
             new_drops = self.sync.stats.dropped - before
             new_inputs = self.sync.stats.per_input - before_inputs
             jumped = self.sync.stats.resets != resets
+            waiting = self.sync.waiting_for()
             if jumped:  # before the new frames reach the worker
                 self._reset_locked()
             for stamp_set, msgs in sets:
@@ -527,10 +548,14 @@ class FcopNode(Node):
             which = ", ".join(
                 f"{INPUTS[i]} {k}" for (r, i), k in sorted(new_inputs.items()) if r == reason
             )
+            silent = ""
+            if reason == "queue_full" and waiting:
+                silent = (f"; nothing from {' and '.join(INPUTS[i] for i in waiting)} to "
+                          "match them (silent, or stamped far from the others?)")
             self._throttle.warn(
                 "sync_" + reason,
                 f"fcop_node: dropped {n} message(s) in the synchroniser: "
-                f"{reason.replace('_', ' ')} ({which})",
+                f"{reason.replace('_', ' ')} ({which}){silent}",
             )
 
     def _check_frame_ids(self, msgs) -> None:
@@ -603,6 +628,7 @@ class FcopNode(Node):
                 "fcop_node: preparing the estimator's kernels (the first run on a machine "
                 "compiles them, up to a minute; later runs load them from the cache)"
             )
+        t0 = time.perf_counter()
         try:
             seconds = compiled.warm_up()
         except Exception as exc:  # noqa: BLE001 - any compiler failure leaves numpy working
@@ -617,6 +643,7 @@ class FcopNode(Node):
                     f"fcop_node: estimator kernels ready ({compiled.describe()}, {seconds:.1f} s)"
                 )
         finally:
+            self.warm_up_seconds = time.perf_counter() - t0
             self._warming_up = False
 
     def _on_worker_error(self, item, exc: Exception) -> None:

@@ -17,7 +17,7 @@ another input has already arrived there, the jump is real (a looped bag, a camer
 and the held messages are used. A real jump back (older than the last emitted set by more than
 ``reset_after``) clears all queues and starts again (``stats.resets``), as does
 :meth:`reset`. A message slightly older than the last emitted set is dropped as late; a second
-message with the same stamp on one input as a duplicate.
+message with the same stamp on one input, waiting or already used in a set, as a duplicate.
 """
 from __future__ import annotations
 
@@ -89,6 +89,7 @@ class StampSynchronizer:
         self._ref: list[int | None] = [None] * self.n          # last accepted stamp per input
         self._steps: list[deque] = [deque(maxlen=9) for _ in range(self.n)]  # recent forward steps
         self._held: list[list] = [[] for _ in range(self.n)]  # a jump waiting for confirmation
+        self._used: list[deque] = [deque(maxlen=64) for _ in range(self.n)]  # stamps in sets
         #: Filled by each :meth:`add`: messages that passed the stamp check, as (input, stamp,
         #: msg), and outliers dropped, as (input, [stamps], the input's stamp before them).
         self.accepted: list[tuple[int, int, object]] = []
@@ -115,6 +116,7 @@ class StampSynchronizer:
         input's stamp history and held messages (a fresh start)."""
         self._queues = [[] for _ in range(self.n)]
         self._last = None
+        self._used = [deque(maxlen=64) for _ in range(self.n)]
         if clocks:
             self._ref = [None] * self.n
             self._steps = [deque(maxlen=9) for _ in range(self.n)]
@@ -122,6 +124,10 @@ class StampSynchronizer:
 
     def pending(self) -> int:
         return sum(len(q) for q in self._queues)
+
+    def waiting_for(self) -> list[int]:
+        """The inputs with nothing queued: what the queued messages of the others wait for."""
+        return [i for i, q in enumerate(self._queues) if not q]
 
     def held(self) -> int:
         """Messages held while a stamp jump waits for confirmation."""
@@ -196,6 +202,9 @@ class StampSynchronizer:
                 self.stats.drop("time_jump_reset", None, pending)
                 self.stats.resets += 1
                 self.reset()
+            elif stamp_ns in self._used[index]:
+                self.stats.drop("duplicate", index)
+                return []
             else:
                 self.stats.drop("late", index)
                 # a good message, only too late to match
@@ -221,6 +230,8 @@ class StampSynchronizer:
             lo, hi = min(heads), max(heads)
             if hi - lo <= self.slop_ns:
                 msgs = [q.pop(0)[1] for q in self._queues]
+                for used, h in zip(self._used, heads):
+                    used.append(h)
                 self._last = hi
                 self.stats.matched += 1
                 out.append((heads[0], msgs))

@@ -56,6 +56,7 @@ class ReplaySummary:
     frames_estimated: int = 0
     errors_pct: list = field(default_factory=list)
     seconds: float = 0.0
+    warm_up_seconds: float = 0.0
     out_dir: str = ""
     damaged: str = ""
     rejected: dict = field(default_factory=dict)
@@ -68,8 +69,12 @@ class ReplaySummary:
     def text(self) -> str:
         lines = [
             f"frames read       {self.frames_read}",
-            f"frames estimated  {self.frames_estimated}",
+            f"frames answered   {self.frames_estimated} with a CameraInfo",
         ]
+        if 0 < self.frames_estimated < self.frames_read and not self.rejected:
+            lines[-1] += (f"; {self.frames_read - self.frames_estimated} without: the window "
+                          "had too few frames yet, or its std_rel was above max_uncertainty or "
+                          "its focal outside focal_min..focal_max")
         if self.errors_pct:
             e = np.abs(np.asarray(self.errors_pct))
             lines.append(
@@ -77,7 +82,9 @@ class ReplaySummary:
                 f"90th percentile {np.percentile(e, 90):.2f}%"
                 f" (over {e.size} estimates with truth)"
             )
-        lines.append(f"throughput        {self.fps:.1f} frames/s ({self.seconds:.1f} s)")
+        warm = (f"; the kernels' preparation, {self.warm_up_seconds:.1f} s, left out"
+                if self.warm_up_seconds >= 0.05 else "")
+        lines.append(f"throughput        {self.fps:.1f} frames/s ({self.seconds:.1f} s{warm})")
         if self.rejected:
             lines.append(
                 "rejected inputs   "

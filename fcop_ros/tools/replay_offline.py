@@ -285,6 +285,9 @@ def replay(
                 pass
 
         summary.seconds = time.perf_counter() - t0
+        if state["node"] is not None:
+            summary.warm_up_seconds = state["node"].warm_up_seconds
+            summary.seconds -= summary.warm_up_seconds
         if state["bar"] is not None:
             step(state["bar"].close)
         if state["node"] is not None:

@@ -94,7 +94,8 @@ def write_report(path: Path, rows, summary: ReplaySummary) -> None:
             0.5, 0.5, "no estimate was published", ha="center", va="center", transform=ax.transAxes
         )
     ax.set_ylabel("focal length [px]")
-    title = f"fcop_replay: {summary.frames_estimated} of {summary.frames_read} frames estimated"
+    title = (f"fcop_replay: {summary.frames_estimated} of {summary.frames_read} frames answered "
+             "with a CameraInfo")
     if summary.errors_pct:
         title += f", median |error| {np.median(summary.errors_pct):.2f}%"
     ax.set_title(title)
