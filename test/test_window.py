@@ -8,9 +8,10 @@ from fcop_ros.core.estimator import FocalEstimate
 
 
 def estimate(focal, std_rel=0.02, size=(640, 480), support=500, std_rel_noise=None,
-             extents=None):
+             extents=None, radii=None):
     return FocalEstimate(focal, (319.5, 239.5), size, inlier_count=support, std_rel=std_rel,
-                         std_rel_noise=std_rel_noise, object_extents=extents or {})
+                         std_rel_noise=std_rel_noise, object_extents=extents or {},
+                         object_radii=radii or {})
 
 
 def empty_estimate():
@@ -167,14 +168,17 @@ def test_a_focal_step_the_image_scale_does_not_follow_is_no_zoom():
 
 def _zoom_restarts(seed, n, extents):
     """(frame, frames kept) at each restart over n frames of a 22% zoom at frame 20, frames
-    scattering by 6% (std_rel 10%, noise 1%); ``extents(k, zoom, rng)`` gives frame k's."""
+    scattering by 6% (std_rel 10%, noise 1%); ``extents(k, zoom, rng)`` gives frame k's
+    extents, or its (extents, radii)."""
     rng = np.random.default_rng(seed)
     w = FocalWindow(WindowOptions(max_frames=30))
     restarts = []
     for k in range(n):
         zoom = 1.22 if k >= 20 else 1.0
         f = 600.0 * zoom * np.exp(rng.normal(0, 0.06))
-        r = w.add(estimate(f, 0.10, std_rel_noise=0.01, extents=extents(k, zoom, rng)), k / 30)
+        sizes = extents(k, zoom, rng)
+        ext, rad = sizes if isinstance(sizes, tuple) else (sizes, None)
+        r = w.add(estimate(f, 0.10, std_rel_noise=0.01, extents=ext, radii=rad), k / 30)
         if r.changed:
             restarts.append((k, r.frames))
     return restarts
@@ -201,6 +205,35 @@ def test_frames_without_extents_are_skipped_by_the_image_scale():
         return None if k % 5 == 0 else extents
 
     assert _zoom_restarts(10, 40, every_fifth_cut) == [(22, 2)]
+
+
+def _rescaled(rng, zoom=1.0, scale_jitter=0.06):
+    """(extents, radii) of _scene's objects seen through a depth network that guesses its
+    scale anew in every frame: the radii follow the zoom alone, the extents also that guess."""
+    radii = _scene(rng, zoom)
+    s = np.exp(rng.normal(0, scale_jitter))
+    return {i: r * s for i, r in radii.items()}, radii
+
+
+def test_a_depth_scale_that_changes_every_frame_leaves_the_image_radii_to_judge():
+    """Extents that scatter by 6% with the depth's scale tell nothing; the objects' image radii
+    still do. The focal step of test_a_focal_step_the_image_scale_does_not_follow_is_no_zoom
+    restarts the window with extents alone and not with radii; the zoom of
+    test_a_zoom_the_image_scale_shows_is_seen_at_once is seen at its second frame and split at
+    the zoom, as with clean extents (with these extents alone: at its seventh)."""
+    changes = {}
+    for with_radii in (True, False):
+        rng = np.random.default_rng(9)
+        w = FocalWindow(WindowOptions(max_frames=30))
+        for k in range(30):
+            f = 600.0 * (1.2 if k >= 15 else 1.0) * np.exp(rng.normal(0, 0.005))
+            ext, rad = _rescaled(rng)
+            w.add(estimate(f, 0.005, std_rel_noise=0.005, extents=ext,
+                           radii=rad if with_radii else None), k / 30)
+        changes[with_radii] = w.changes
+    assert changes == {True: 0, False: 1}
+    assert _zoom_restarts(10, 40, lambda k, zoom, rng: _rescaled(rng, zoom)) == [(21, 2)]
+    assert _zoom_restarts(10, 40, lambda k, zoom, rng: _rescaled(rng, zoom)[0]) == [(26, 7)]
 
 
 def test_one_wild_image_scale_does_not_move_the_split_far():

@@ -55,7 +55,9 @@ class FocalEstimate:
     median depth (px m)} of the objects that made the estimate, except those the image's edge
     cuts: the focal length times the object's size, whatever its NOCS say. A zoom scales it;
     moving the camera or the object does not (the depth makes up for the image size), so the
-    window tells a zoom from frames whose errors moved by it.
+    window tells a zoom from frames whose errors moved by it. object_radii: the same objects'
+    RMS image radius alone (px), which a depth network's frame-to-frame change of scale does
+    not move.
     """
 
     focal: float | None
@@ -79,20 +81,22 @@ class FocalEstimate:
     instances_skipped: int = 0
     instances: list = field(default_factory=list, repr=False)
     object_extents: dict = field(default_factory=dict)
+    object_radii: dict = field(default_factory=dict)
 
 
-def _extent(inst: Instance) -> float:
-    """The instance's RMS image radius about its centroid (px) times its median depth (m)."""
+def _radius_depth(inst: Instance) -> tuple[float, float]:
+    """The instance's RMS image radius about its centroid (px) and its median depth (m)."""
     if compiled.ENABLED and inst.x.dtype == np.float64 and inst.d.dtype == np.float64:
-        return float(_extent_kernel(np.ascontiguousarray(inst.x), inst.d))
+        r, d = _radius_depth_kernel(np.ascontiguousarray(inst.x), inst.d)
+        return float(r), float(d)
     r = inst.x - inst.x.mean(0)
-    return float(np.sqrt(np.mean(r[:, 0] ** 2 + r[:, 1] ** 2)) * np.median(inst.d))
+    return float(np.sqrt(np.mean(r[:, 0] ** 2 + r[:, 1] ** 2))), float(np.median(inst.d))
 
 
 @compiled.kernel
-def _extent_kernel(x, d):
-    """``_extent`` in two passes over x and a selection of d's median (numpy's few calls on an
-    axis of two cost more than the arithmetic: 0.7 ms for a frame's five objects)."""
+def _radius_depth_kernel(x, d):
+    """``_radius_depth`` in two passes over x and a selection of d's median (numpy's few calls
+    on an axis of two cost more than the arithmetic: 0.7 ms for a frame's five objects)."""
     n = x.shape[0]
     m0 = m1 = 0.0
     for r in range(n):
@@ -103,7 +107,7 @@ def _extent_kernel(x, d):
     for r in range(n):
         u, v = x[r, 0] - m0, x[r, 1] - m1
         s += u * u + v * v
-    return np.sqrt(s / n) * np.median(d)
+    return np.sqrt(s / n), np.median(d)
 
 
 def _no_instance_reason(nocs, mask, opt: EstimatorOptions) -> str:
@@ -499,11 +503,13 @@ def _finish(
         est.reason = f"focal {focal:.1f} px outside focal_range [{lo:g}, {hi:g}]"
         return est
     est.focal, est.std_rel, est.instances = focal, std_rel, list(instances)
-    est.object_extents = {
-        inst.instance_id: _extent(inst)
+    sizes = {
+        inst.instance_id: _radius_depth(inst)
         for inst in (instances if measured is None else measured)
         if not inst.at_border
     }
+    est.object_extents = {i: r * d for i, (r, d) in sizes.items()}
+    est.object_radii = {i: r for i, (r, _) in sizes.items()}
     if poses:
         est.objects = estimate_poses(est.instances, focal, exclude=est.mirrored, rng=rng)
     return est

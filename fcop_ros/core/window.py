@@ -36,16 +36,19 @@ Frames that carry their objects' extents (``FocalEstimate.object_extents``: imag
 depth, the focal length times the object's size) also give the window an image scale: per
 frame, the median over its objects of their log extent less that object's median in the window
 (matched by instance id). Pixels and depth alone make it, so the frames' focal errors do not
-move it; a zoom moves it by the zoom. A step in the focal lengths stands only if the image scale
-moved the same way by more than half as much, and a step in the image scale (the same test,
-without a floor) that the focal lengths follow by more than half is a zoom at once. The scale
-judges only where no zoom and that zoom lie four of its standard errors apart (instance ids
-that do not follow the objects make it scatter). The split then moves, by at most
-``change_frames``, to where the fewest frames lie on the side whose image scale they are
-further from. Frames without any of the window's objects' extents (hand-built estimates, or
-all objects cut by the image's edge) are skipped in the scale: it judges a split only with
-``change_frames`` frames of its own on either side, and a split it finds starts at its first
-newer frame.
+move it; a zoom moves it by the zoom. The objects' image radii (``object_radii``) make a second
+image scale the same way: a zoom moves it as much, a depth network that guesses its scale anew
+in every frame does not scatter it (it scatters the first), a camera moving towards the objects
+moves it (it leaves the first). A step in the focal lengths stands unless an image scale moved
+the same way by less than half as much, and a step in an image scale (the same test, without
+a floor) that the focal lengths follow by more than half, and no scale denies, is a zoom at
+once. A scale judges only where no zoom and that zoom lie four of its standard errors apart
+(instance ids that do not follow the objects make it scatter). The split then moves, by at
+most ``change_frames``, to where the fewest frames lie on the side whose image scale they are
+further from (of the scale that tells the zoom best). Frames without any of the window's
+objects' sizes (hand-built estimates, or all objects cut by the image's edge) are skipped in
+a scale: it judges a split only with ``change_frames`` frames of its own on either side, and a
+split it finds starts at its first newer frame.
 
 A change of image size starts a new window. The settings are a :class:`WindowOptions`.
 """
@@ -91,6 +94,7 @@ class _Frame:
     support: int
     size: tuple | None
     extents: dict
+    radii: dict
 
 
 class FocalWindow:
@@ -134,7 +138,8 @@ class FocalWindow:
                 noise,
                 int(estimate.inlier_count),
                 size,
-                _log_extents(estimate) if ok else {},
+                _log_sizes(estimate.object_extents) if ok else {},
+                _log_sizes(estimate.object_radii) if ok else {},
             )
         )
         while len(self._frames) > self.options.max_frames:
@@ -174,44 +179,60 @@ class FocalWindow:
             return (float(np.median(noise[:c]) + max(b_old - b_new, 0.0)),
                     float(np.median(noise[c:]) + max(b_new - b_old, 0.0)))
 
-        scale, at = _scale_track(rated)
-        if scale is not None and scale.size < 2 * k:
-            scale = None
+        # The image scale, from the objects' extents and from their image radii alone: a zoom
+        # moves both; a depth network whose scale changes from frame to frame scatters the
+        # first, a camera that moves towards the objects moves the second.
+        tracks = [t for t in (_scale_track(rated, "extents"), _scale_track(rated, "radii"))
+                  if t is not None and t[0].size >= 2 * k]
 
-        def judged(c):
+        def judged(at, c):
             # The scale's split for the frames' split c, where change_frames frames with a
             # scale lie on either side of it (frames without one, e.g. all objects cut by the
             # image's edge, are skipped).
-            if scale is None:
-                return None
             cs = int(np.searchsorted(at, c))
-            return cs if k <= cs <= scale.size - k else None
+            return cs if k <= cs <= at.size - k else None
+
+        def denied(c, step):
+            # Some scale that can tell a zoom of ``step`` at c from none moved less than half.
+            for scale, at in tracks:
+                cs = judged(at, c)
+                if cs is not None and _telling(scale, cs, step) and not _agrees(
+                        _difference(scale, cs), step):
+                    return True
+            return False
 
         hit = None
         # No step exceeds the series' range: a window whose frames all lie within
         # change_threshold of each other needs no split search.
         c, step, z = _step(y, k, floor) if np.ptp(y) > least else (k, 0.0, 0.0)
-        if z > sigma and abs(step) > least:
+        if z > sigma and abs(step) > least and not denied(c, step):
             # A zoom moves the image scale by as much as the focal length; frames whose errors
-            # moved (a new view of the objects) leave it where it was. Judged only where the
+            # moved (a new view of the objects) leave it where it was. Judged only where a
             # scale can tell the two apart (instance ids that do not follow the objects make
             # it scatter).
-            cs = judged(c)
-            if cs is None or not _telling(scale, cs, step) or _agrees(
-                    _difference(scale, cs), step):
-                hit = c
-        if hit is None and scale is not None and np.ptp(scale) > least:
-            # The image scale is told by pixels and depth alone, however the frames err: a step
-            # in it that the frames' focal lengths follow is a zoom, seen at once. The newer
-            # side starts at its first frame with a scale.
-            cs, moved, z = _step(scale, k, None)
-            c = int(at[cs])
-            if z > sigma and abs(moved) > least and _agrees(_difference(y, c), moved):
-                hit = c
+            hit = c
+        for scale, at in tracks if hit is None else ():
+            # The image scale is told by pixels (and depth) alone, however the frames err: a
+            # step in it that the frames' focal lengths follow is a zoom, seen at once. The
+            # newer side starts at its first frame with a scale.
+            if np.ptp(scale) > least:
+                cs, moved, z = _step(scale, k, None)
+                c = int(at[cs])
+                if (z > sigma and abs(moved) > least and _agrees(_difference(y, c), moved)
+                        and not denied(c, moved)):
+                    hit = c
+                    break
         if hit is None:
             return False
-        cs = judged(hit)
-        if cs is not None and _telling(scale, cs, _difference(scale, cs)):
+        best = None  # the scale that tells the zoom best places the split
+        for scale, at in tracks:
+            cs = judged(at, hit)
+            if cs is not None and _telling(scale, cs, _difference(scale, cs)):
+                se = _standard_error(scale, cs)
+                if best is None or se < best[0]:
+                    best = (se, scale, at, cs)
+        if best is not None:
+            _, scale, at, cs = best
             hit = int(at[_split_by_scale(scale, cs, k)])
         first = rated[hit]
         while self._frames[0] is not first:
@@ -268,21 +289,17 @@ class FocalWindow:
         return max(budget - varies, 0.0) + max(spread2, noise_var) / n_eff
 
 
-def _log_extents(estimate: FocalEstimate) -> dict:
-    """{instance_id: log extent} of the estimate's objects with a positive, finite extent."""
-    return {
-        i: float(np.log(e))
-        for i, e in estimate.object_extents.items()
-        if np.isfinite(e) and e > 0
-    }
+def _log_sizes(sizes: dict) -> dict:
+    """{instance_id: log size} of the positive, finite sizes (extents or radii)."""
+    return {i: float(np.log(e)) for i, e in sizes.items() if np.isfinite(e) and e > 0}
 
 
-def _extent_matrix(rated) -> tuple[np.ndarray, np.ndarray] | None:
-    """Log extents of the frames' objects, (frames with any, objects) with NaN where a frame
-    lacks one, and those frames' indices in ``rated``. Objects are matched by instance id and
-    kept if seen in at least half the frames that carry extents; frames with none of them are
-    left out. None without any."""
-    carry = [f.extents for f in rated]
+def _extent_matrix(rated, attr: str = "extents") -> tuple[np.ndarray, np.ndarray] | None:
+    """Log sizes (``attr``: the frames' ``extents`` or ``radii``) of the frames' objects,
+    (frames with any, objects) with NaN where a frame lacks one, and those frames' indices in
+    ``rated``. Objects are matched by instance id and kept if seen in at least half the frames
+    that carry sizes; frames with none of them are left out. None without any."""
+    carry = [getattr(f, attr) for f in rated]
     seen = Counter(i for x in carry for i in x)
     ids = sorted(i for i, m in seen.items() if 2 * m >= sum(1 for x in carry if x))
     at = np.array([r for r, x in enumerate(carry) if any(i in x for i in ids)], dtype=int)
@@ -297,13 +314,14 @@ def _extent_matrix(rated) -> tuple[np.ndarray, np.ndarray] | None:
     return e, at
 
 
-def _scale_track(rated) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """The frames' image scale against the window's, in log, and the indices in ``rated`` of
-    the frames it has: per frame, the median over its objects of their log extent less that
-    object's median over the window. (None, None) without extents."""
-    m = _extent_matrix(rated)
+def _scale_track(rated, attr: str = "extents") -> tuple[np.ndarray, np.ndarray] | None:
+    """The frames' image scale against the window's, in log, from their objects' ``attr``
+    (``extents`` or ``radii``), and the indices in ``rated`` of the frames it has: per frame,
+    the median over its objects of their log size less that object's median over the window.
+    None without sizes."""
+    m = _extent_matrix(rated, attr)
     if m is None:
-        return None, None
+        return None
     e, at = m
     return _nanmedian(e - _nanmedian(e, 0)[None, :], 1), at
 
