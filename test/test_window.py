@@ -236,6 +236,23 @@ def test_a_depth_scale_that_changes_every_frame_leaves_the_image_radii_to_judge(
     assert _zoom_restarts(10, 40, lambda k, zoom, rng: _rescaled(rng, zoom)[0]) == [(26, 7)]
 
 
+def test_a_zoom_while_the_camera_moves_is_seen_by_the_scale_that_moves_with_it():
+    """The zoom of test_a_zoom_the_image_scale_shows_is_seen_at_once while the camera backs
+    away by 15% (the radii grow by 6%, the extents by the zoom's 22%), and a dolly zoom (the
+    radii held): the extents' scale lets the step stand, and the window restarts at the zoom
+    as with a still camera. (When any scale that could tell vetoed a step, neither restarted in
+    40 frames.)"""
+    def backing(share):
+        def sizes(k, zoom, rng):
+            away = share if k >= 20 else 1.0
+            radii = _scene(rng, zoom / away)
+            return {i: r * away for i, r in radii.items()}, radii
+        return sizes
+
+    assert _zoom_restarts(10, 40, backing(1.15)) == [(21, 2)]
+    assert _zoom_restarts(10, 40, backing(1.22)) == [(21, 2)]
+
+
 def test_one_wild_image_scale_does_not_move_the_split_far():
     """The zoom of test_a_zoom_the_image_scale_shows_is_seen_at_once with the objects' extents
     of frame 21 (the second after the zoom) at the old scale: the window restarts at frame 22
