@@ -203,24 +203,23 @@ class ErrorState:
         st.offset = float(rng.normal(0, err.offset)) if err.offset > 0 else 0.0
         return st
 
-    def _field(self, key, rng, h, w, cells):
-        make = _FIELDS[self.variant]
-        new = make(rng, h, w, cells)
+    def _drift(self, key, new):
+        """``new`` blended with what ``key`` held before (if of its shape), so that it renews a
+        share 1 - rho^2 of itself per frame at the same variance; kept under ``key``."""
         old = self.fields.get(key)
-        if old is not None and old.shape == (h, w):
+        if old is not None and np.shape(old) == np.shape(new):
             new = self.rho * old + np.sqrt(1 - self.rho ** 2) * new
         self.fields[key] = new
         return new
+
+    def _field(self, key, rng, h, w, cells):
+        return self._drift(key, _FIELDS[self.variant](rng, h, w, cells))
 
     def _disparity(self, rng, depth):
         """A relative depth error linear in depth over the frame (the first-order effect of a
         shift of inverse depth), unit std over the finite pixels times a coefficient that
         drifts as the fields do (unit variance)."""
-        b = rng.normal()
-        old = self.fields.get("disparity")
-        if old is not None:
-            b = self.rho * old + np.sqrt(1 - self.rho ** 2) * b
-        self.fields["disparity"] = b
+        b = self._drift("disparity", rng.normal())
         ok = np.isfinite(depth)
         g = np.zeros_like(depth)
         if ok.sum() > 1:
