@@ -84,12 +84,7 @@ class StampSynchronizer:
         self.reset_ns = int(round(reset_after * 1e9))
         self.confirm = int(confirm)
         self.stats = SyncStats()
-        self._queues: list[list] = [[] for _ in range(self.n)]
-        self._last: int | None = None
-        self._ref: list[int | None] = [None] * self.n          # last accepted stamp per input
-        self._steps: list[deque] = [deque(maxlen=9) for _ in range(self.n)]  # recent forward steps
-        self._held: list[list] = [[] for _ in range(self.n)]  # a jump waiting for confirmation
-        self._used: list[deque] = [deque(maxlen=64) for _ in range(self.n)]  # stamps in sets
+        self.reset(clocks=True)
         #: Filled by each :meth:`add`: messages that passed the stamp check, as (input, stamp,
         #: msg), and outliers dropped, as (input, [stamps], the input's stamp before them).
         self.accepted: list[tuple[int, int, object]] = []
@@ -114,13 +109,13 @@ class StampSynchronizer:
     def reset(self, clocks: bool = False) -> None:
         """Forget all queued messages and the last emitted stamp; with ``clocks`` also each
         input's stamp history and held messages (a fresh start)."""
-        self._queues = [[] for _ in range(self.n)]
-        self._last = None
-        self._used = [deque(maxlen=64) for _ in range(self.n)]
+        self._queues: list[list] = [[] for _ in range(self.n)]
+        self._last: int | None = None
+        self._used: list[deque] = [deque(maxlen=64) for _ in range(self.n)]  # stamps in sets
         if clocks:
-            self._ref = [None] * self.n
-            self._steps = [deque(maxlen=9) for _ in range(self.n)]
-            self._held = [[] for _ in range(self.n)]
+            self._ref: list[int | None] = [None] * self.n  # last accepted stamp per input
+            self._steps: list[deque] = [deque(maxlen=9) for _ in range(self.n)]  # forward steps
+            self._held: list[list] = [[] for _ in range(self.n)]  # a jump awaiting confirmation
 
     def pending(self) -> int:
         return sum(len(q) for q in self._queues)
