@@ -101,9 +101,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    if (args.zoom_frame is None) != (args.zoom_focal is None):
-        print("fcop_make_bag: --zoom-frame and --zoom-focal go together", file=sys.stderr)
-        return 2
     if not (math.isfinite(args.rate) and args.rate > 0):
         print(f"fcop_make_bag: --rate must be a positive number of frames per second, got "
               f"{args.rate}", file=sys.stderr)
