@@ -297,7 +297,7 @@ def _log_sizes(sizes: dict) -> dict:
     return {i: float(np.log(e)) for i, e in sizes.items() if np.isfinite(e) and e > 0}
 
 
-def _extent_matrix(rated, attr: str = "extents") -> tuple[np.ndarray, np.ndarray] | None:
+def _size_matrix(rated, attr: str) -> tuple[np.ndarray, np.ndarray] | None:
     """Log sizes (``attr``: the frames' ``extents`` or ``radii``) of the frames' objects,
     (frames with any, objects) with NaN where a frame lacks one, and those frames' indices in
     ``rated``. Objects are matched by instance id and kept if seen in at least half the frames
@@ -317,12 +317,12 @@ def _extent_matrix(rated, attr: str = "extents") -> tuple[np.ndarray, np.ndarray
     return e, at
 
 
-def _scale_track(rated, attr: str = "extents") -> tuple[np.ndarray, np.ndarray] | None:
+def _scale_track(rated, attr: str) -> tuple[np.ndarray, np.ndarray] | None:
     """The frames' image scale against the window's, in log, from their objects' ``attr``
     (``extents`` or ``radii``), and the indices in ``rated`` of the frames it has: per frame,
     the median over its objects of their log size less that object's median over the window.
     None without sizes."""
-    m = _extent_matrix(rated, attr)
+    m = _size_matrix(rated, attr)
     if m is None:
         return None
     e, at = m
