@@ -17,13 +17,13 @@ Single frames, per preset: median and p90 |focal error| (%), signed median (%), 
 with an estimate, and for fcop_ros the coverage of |error| <= 2 std_rel; beside it the paper's
 method taken literally, the 60-line plain reference of the accuracy issue and P4Pf (pycolmap,
 2D-NOCS only, median over objects; skipped without pycolmap). Bias: each zero-mean mechanism
-alone, its strength drawn up to its base bound. Window: static orbiting sequences of 30 frames
-(window of 30) against the single frames of the same sequences; zoom sequences (x1.25 and x0.8
-at frame 20 of 40): frames until the window stays within 5% of the new focal length, and
-restarts on static ones. Preset bias (``--parts preset_bias``): fcop_ros's signed median over
-``--bias-frames`` frames of each full preset, with its standard error. Weights (``--parts
-weights``): within a frame, how the objects' errors rank with their systematic and their
-noise variance, and the frame's error under either weighting.
+alone, its strength drawn up to its base bound, with its signed median's standard error.
+Window: static orbiting sequences of 30 frames (window of 30) against the single frames of the
+same sequences; zoom sequences (x1.25 and x0.8 at frame 20 of 40): frames until the window
+stays within 5% of the new focal length, and restarts on static ones. Preset bias (``--parts
+preset_bias``): fcop_ros's signed median over ``--bias-frames`` frames of each full preset, with
+its standard error. Weights (``--parts weights``): within a frame, how the objects' errors rank
+with their systematic and their noise variance, and the frame's error under either weighting.
 """
 from __future__ import annotations
 
@@ -141,9 +141,9 @@ def single_frames(presets, frames, first_seed, variant, have_colmap):
 
 
 def bias(frames, first_seed, variant):
-    print("\n| mechanism alone (strength up to) | signed median % | median abs error % | "
-          "coverage |")
-    print("|---|---|---|---|")
+    print("\n| mechanism alone (strength up to) | signed median % | its standard error "
+          "(bootstrap) | median abs error % | coverage |")
+    print("|---|---|---|---|---|")
     for fam in ZERO_MEAN_FAMILIES:
         err, cover = [], []
         for s in range(frames):
@@ -154,8 +154,10 @@ def bias(frames, first_seed, variant):
                 err.append(100 * e)
                 cover.append(abs(e) <= 2 * est.std_rel)
         err = np.array(err)
+        boot = np.random.default_rng(0).choice(err, (1000, err.size))
         print(f"| {fam} ({getattr(WORLD_PRESETS['only_' + fam], fam)}) | {np.median(err):+.2f} | "
-              f"{np.median(np.abs(err)):.2f} | {100 * np.mean(cover):.0f}% |", flush=True)
+              f"{np.std(np.median(boot, axis=1)):.2f} | {np.median(np.abs(err)):.2f} | "
+              f"{100 * np.mean(cover):.0f}% |", flush=True)
 
 
 def preset_bias(presets, frames, first_seed, variant):
