@@ -31,6 +31,7 @@ def values(status):
 @pytest.mark.parametrize("arg, expected", [
     ("focal_min:=30000.0", ["focal_min=30000.0", "below focal_max=20000.0"]),
     ("window_frames:=0", ["window_frames=0", "[1, 1000]"]),
+    ("min_frames:=40", ["min_frames=40", "at most window_frames=30"]),
     ("window_frames:=abc", ["window_frames='abc'", "an integer in [1, 1000]"]),
     ("sync_mode:=fuzzy", ["sync_mode='fuzzy'", "one of exact, approximate"]),
     ("principal_point_x:=-5.0", ["principal_point_x=-5.0", "[-1.0, 1000000.0]"]),
@@ -123,6 +124,33 @@ def test_integer_for_a_float_parameter_is_taken(harness):
     # `-p focal_min:=300` is what people type; rclpy alone refuses an INTEGER for a DOUBLE.
     h = harness(node_args=["--ros-args", "-p", "focal_min:=300"])
     assert h.node.p["focal_min"] == 300.0
+    # At run time too (`ros2 param set /fcop_node focal_min 250` sends an INTEGER).
+    set_ok(h, focal_min=250)
+    assert h.node.get_parameter("focal_min").value == 250.0 and h.node.p["focal_min"] == 250.0
+    assert isinstance(h.node.p["focal_min"], float)
+
+
+def test_parameters_in_conflict_are_refused_naming_the_one_set(harness):
+    h = harness()
+    for values_, reason in [
+        ({"focal_max": 10.0},
+         "parameter focal_max=10.0 is not allowed: it must be above focal_min=50.0"),
+        ({"focal_min": 30000.0},
+         "parameter focal_min=30000.0 is not allowed: it must be below focal_max=20000.0"),
+        # a window that can never hold min_frames frames would never publish
+        ({"min_frames": 31},
+         "parameter min_frames=31 is not allowed: it must be at most window_frames=30"),
+        ({"window_frames": 4, "min_frames": 5},
+         "parameter min_frames=5 is not allowed: it must be at most window_frames=4"),
+    ]:
+        res = h.node.set_parameters_atomically(
+            [Parameter(k, value=v) for k, v in values_.items()])
+        assert not res.successful and res.reason == reason, res.reason
+    set_ok(h, min_frames=5)
+    res = h.node.set_parameters([Parameter("window_frames", value=4)])[0]
+    assert res.reason == ("parameter window_frames=4 is not allowed: it must be at least "
+                          "min_frames=5")
+    set_ok(h, window_frames=5)
 
 
 # ----- run time: each settable parameter changes behaviour

@@ -350,6 +350,8 @@ def test_invalid_settings_are_refused():
         FocalWindow(WindowOptions(max_age=-1))
     with pytest.raises(ValueError):
         FocalWindow(WindowOptions(change_threshold=0))
+    with pytest.raises(ValueError, match="min_frames"):  # it could never report
+        FocalWindow(WindowOptions(max_frames=5, min_frames=6))
     with pytest.raises(TypeError, match="WindowOptions"):
         FocalWindow(30)
 

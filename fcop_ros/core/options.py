@@ -157,6 +157,8 @@ class WindowOptions:
     def __post_init__(self):
         if self.max_frames < 1:
             raise ValueError("max_frames must be >= 1")
+        if not 1 <= self.min_frames <= self.max_frames:
+            raise ValueError("min_frames must be in 1..max_frames (the window holds no more)")
         if self.max_age is not None and not self.max_age > 0:
             raise ValueError("max_age must be > 0 seconds or None")
         if self.change_frames < 1:

@@ -183,6 +183,8 @@ class FcopNode(Node):
         except ParameterError:
             Node.destroy_node(self)
             raise
+        if hasattr(self, "add_pre_set_parameters_callback"):  # rclpy of Jazzy and later
+            self.add_pre_set_parameters_callback(self._integers_as_doubles)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._now = time.monotonic  # the clock of rates and ages; replaceable in tests
@@ -356,6 +358,17 @@ class FcopNode(Node):
         if problem:
             raise ParameterError(problem)
 
+    @staticmethod
+    def _integers_as_doubles(params) -> list:
+        """An integer set for a double parameter is that double (``ros2 param set ... focal_min
+        300`` sends an integer), as at start-up; rclpy would refuse it by type."""
+        return [
+            Parameter(prm.name, value=float(prm.value))
+            if prm.name in PARAMETERS and isinstance(PARAMETERS[prm.name].default, float)
+            and prm.type_ == Parameter.Type.INTEGER else prm
+            for prm in params
+        ]
+
     def _on_set_parameters(self, params) -> SetParametersResult:
         """rclpy has applied the descriptors (type, range, read-only); refuse what they cannot
         express (a choice among words, a text rule, rules between parameters), then apply."""
@@ -367,7 +380,7 @@ class FcopNode(Node):
                     new[prm.name] = prm.value
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        problem = check_combination(new, self._size)
+        problem = check_combination(new, self._size, {prm.name for prm in params})
         if problem:
             return SetParametersResult(successful=False, reason=problem)
         changed = {k for k in new if new[k] != self.p.get(k)}

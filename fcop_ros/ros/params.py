@@ -284,14 +284,19 @@ def check_words(name: str, value) -> None:
         check_value(name, value)
 
 
-def check_combination(p: dict, image_size=None) -> str:
+def check_combination(p: dict, image_size=None, changed=()) -> str:
     """What is wrong with a complete set of values together ('' if nothing); ``image_size``
-    (width, height), once known, bounds the principal point."""
-    if p["focal_min"] >= p["focal_max"]:
-        return (
-            f"parameter focal_min={p['focal_min']} is not allowed: it must be below "
-            f"focal_max={p['focal_max']}"
-        )
+    (width, height), once known, bounds the principal point. Of two parameters in conflict,
+    the message names the one being ``changed`` (the first of the pair if both or neither)."""
+    for low, high, rule in (("focal_min", "focal_max", "below"),
+                            ("min_frames", "window_frames", "at most")):
+        if (p[low] < p[high]) if rule == "below" else (p[low] <= p[high]):
+            continue
+        if high in changed and low not in changed:
+            other = "above" if rule == "below" else "at least"
+            return (f"parameter {high}={p[high]} is not allowed: it must be {other} "
+                    f"{low}={p[low]}")
+        return f"parameter {low}={p[low]} is not allowed: it must be {rule} {high}={p[high]}"
     if p["noise_bound_mode"] == "relative" and not 0 < p["noise_bound"] <= MAX_RELATIVE_BOUND:
         return (
             f"parameter noise_bound={p['noise_bound']} is not allowed: a fraction in "
