@@ -542,6 +542,8 @@ class FcopNode(Node):
                 f"outlier stamp ({', '.join(_sec(s) for s in stamps)}; the "
                 f"{INPUTS[i]} stamps before were at {_sec(ref)})",
             )
+        if jumped:
+            self._forget_answers()
         for stamp_set, msgs in sets:
             self._check_frame_ids(msgs)
         for i, s, m in accepted:
@@ -599,6 +601,15 @@ class FcopNode(Node):
                 self._remember(self._unanswered, stamp)
                 return
             self._publish_info(stamp, info, est.window, self._last_objects)
+
+    def _forget_answers(self) -> None:
+        """After a reset, stamps seen before may come again (a looped bag, a camera clock that
+        restarts): each gets its CameraInfo anew, and older stamps than the last answered one
+        are answered again."""
+        with self._pub_lock:
+            self._answered.clear()
+            self._unanswered.clear()
+            self._last_info_stamp = -1
 
     @staticmethod
     def _remember(od: OrderedDict, stamp: int, keep: int = 256) -> None:
@@ -851,7 +862,7 @@ class FcopNode(Node):
         with self._pub_lock:  # a new publisher: late joiners get nothing from before the reset
             self.destroy_publisher(self.pub_latest)
             self.pub_latest = self._latched_publisher()
-            self._last_info_stamp = -1
+        self._forget_answers()
         response.success = True
         response.message = "focal window, synchroniser, hand-off and latest_camera_info cleared"
         self._throttle.info("reset", "fcop_node: reset by service")
