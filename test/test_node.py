@@ -233,6 +233,7 @@ def test_diagnostics(harness):
     assert spin_until(h.ex, lambda: len(rec) >= 1, 10)
     st = rec.msgs[-1].status[0]
     assert st.name == "fcop_node: focal estimate" and st.level == st.WARN  # no evidence yet
+    assert st.hardware_id == "/fcop_node"  # tells nodes of one name in two namespaces apart
     assert h.frame(frame_messages(clean_frame(2), T0))
 
     def values(msg):

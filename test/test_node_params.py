@@ -40,8 +40,8 @@ def values(status):
      ["qos_overrides./depth.subscription.depth='abc'", "an integer"]),
     ("qos_overrides./depth.subscription.reliability:=sometimes",
      ["qos_overrides./depth.subscription.reliability='sometimes'", "reliable, best_effort"]),
-    ("qos_overrides./camera_info.publisher.durability:=7",
-     ["qos_overrides./camera_info.publisher.durability=7", "transient_local"]),
+    ("qos_overrides./camera_info.publisher.history:=7",
+     ["qos_overrides./camera_info.publisher.history=7", "keep_last"]),
 ])
 def test_bad_parameter_at_start_up_is_one_line_and_exit_2(arg, expected):
     exe = os.path.join(BIN, "fcop_node")
@@ -106,7 +106,9 @@ def test_a_parameter_the_node_does_not_have_is_named(harness, capfd):
     """rclpy ignores an override of an undeclared parameter without a word; the node names it
     and the likely intended one, and runs with its defaults."""
     h = harness(node_args=["--ros-args", "-p", "window_frame:=5", "-p", "max_uncertanty:=0.2",
-                           "-p", "qos_overrides./nope.subscription.depth:=3"])
+                           "-p", "qos_overrides./nope.subscription.depth:=3",
+                           # a policy rclpy takes no override of (a warning, not a refusal)
+                           "-p", "qos_overrides./depth.subscription.durability:=transient_local"])
     assert h.node.p["window_frames"] == 30
     err = capfd.readouterr().err
     assert "parameter window_frame is not one of this node's; ignored (did you mean " \
@@ -114,7 +116,9 @@ def test_a_parameter_the_node_does_not_have_is_named(harness, capfd):
     assert "parameter max_uncertanty is not one of this node's; ignored (did you mean " \
         "max_uncertainty?)" in err
     assert "parameter qos_overrides./nope.subscription.depth is not one of this node's" in err
-    assert err.count("is not one of this node's") == 3
+    assert "parameter qos_overrides./depth.subscription.durability is not one of this " \
+        "node's; ignored (QoS overrides take history, depth, reliability here)" in err
+    assert err.count("is not one of this node's") == 4
     h = harness(node_args=["--ros-args", "-p", "use_sim_time:=false", "-p",
                            "qos_overrides./depth.subscription.depth:=3", "-p", "seed:=4"])
     assert "is not one of this node's" not in capfd.readouterr().err

@@ -92,6 +92,9 @@ _QOS_WORDS = {
         ("liveliness", LivelinessPolicy),
     )
 }
+# What a QoS override may change on the node's topics (QoSOverridingOptions'
+# with_default_policies); rclpy declares no parameter for the other policies.
+_QOS_OVERRIDABLE = ("history", "depth", "reliability")
 _QOS_INTEGERS = {
     "depth": "an integer >= 0",
     "deadline": "an integer >= 0 (nanoseconds)",
@@ -276,7 +279,7 @@ class FcopNode(Node):
         'publisher') that rclpy would refuse with a traceback."""
         prefix = f"qos_overrides.{self.resolve_topic_name(topic)}.{kind}."
         for name, prm in getattr(self, "_parameter_overrides", {}).items():
-            if name.startswith(prefix):
+            if name.startswith(prefix) and name[len(prefix):] in _QOS_OVERRIDABLE:
                 problem = qos_override_problem(name[len(prefix):], prm.value)
                 if problem:
                     raise ParameterError(
@@ -330,9 +333,14 @@ class FcopNode(Node):
         for name in sorted(getattr(self, "_parameter_overrides", {})):
             if not self.has_parameter(name):
                 close = difflib.get_close_matches(name, list(PARAMETERS), n=1)
+                policy = name.rsplit(".", 1)[-1]
+                if name.startswith("qos_overrides.") and (
+                        policy in _QOS_WORDS or policy in _QOS_INTEGERS):
+                    hint = f" (QoS overrides take {', '.join(_QOS_OVERRIDABLE)} here)"
+                else:
+                    hint = f" (did you mean {close[0]}?)" if close else ""
                 self.get_logger().warning(
-                    f"fcop_node: parameter {name} is not one of this node's; ignored"
-                    + (f" (did you mean {close[0]}?)" if close else "")
+                    f"fcop_node: parameter {name} is not one of this node's; ignored{hint}"
                 )
 
     def _declare_parameters(self) -> None:
