@@ -679,7 +679,10 @@ class FcopNode(Node):
             self._warming_up = False
 
     def _on_worker_error(self, item, exc: Exception) -> None:
-        """The node must outlive any single bad frame: count it and say which."""
+        """The node must outlive any single bad frame: count it and say which. A frame that
+        outlived destroy_node's wait fails on the destroyed handles: nothing to say then."""
+        if self.worker.stopping:
+            return
         self._reject("exception")
         self._throttle.warn(
             "exception", f"fcop_node: frame {item[0]} failed: {type(exc).__name__}: {exc}"

@@ -92,6 +92,12 @@ class LatestSlotWorker:
         with self._cv:
             return self._busy_since
 
+    @property
+    def stopping(self) -> bool:
+        """Whether :meth:`stop` was called (an item still running may outlive its owner)."""
+        with self._cv:
+            return self._stop
+
     def idle(self) -> bool:
         """True when no item waits and none is being handled."""
         with self._cv:
