@@ -37,6 +37,7 @@ bench: $(STAMP)
 	$(PY) bench/world_accuracy.py --frames 60 --heldout
 	$(PY) bench/world_accuracy.py --frames 60 --heldout2
 	$(PY) bench/world_accuracy.py --frames 60 --heldout3
+	$(PY) bench/world_accuracy.py --frames 60 --heldout4
 	$(PY) bench/world_calibration.py --frames 60
 	$(PY) bench/paper_simulation.py --out docs
 

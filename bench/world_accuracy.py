@@ -12,6 +12,9 @@ Gaussian-bump depth fields, twisted NOCS, shifted masks) was first evaluated on 
 --heldout3 (seeds from 980000 and 985000, a fourth error model: a depth error affine in
 disparity plus polynomial fields, the depth scale redrawn every frame, radially bulging NOCS,
 ragged masks) was fixed on 23 Nov 2026 and first evaluated at the end of that round.
+--heldout4 (seeds from 990000 and 995000, a fifth error model: depth errors attached to each
+object's surface, each object's distance misjudged per frame, NOCS stretched along the viewing
+axis, polygon masks with holes, 8-bit NOCS) was fixed on 23 Nov 2026 and run once after it.
 
 Single frames, per preset: median and p90 |focal error| (%), signed median (%), share of frames
 with an estimate, and for fcop_ros the coverage of |error| <= 2 std_rel; beside it the paper's
@@ -295,6 +298,8 @@ def main() -> None:
                       help="the second held-out seeds and error model instead")
     held.add_argument("--heldout3", action="store_true",
                       help="the third held-out seeds and error model instead")
+    held.add_argument("--heldout4", action="store_true",
+                      help="the fourth held-out seeds and error model instead")
     ap.add_argument("--parts", nargs="+", default=["single", "bias", "window"],
                     choices=["single", "bias", "window", "preset_bias", "weights"],
                     help="preset_bias (not run by default): fcop_ros's signed median over "
@@ -313,6 +318,7 @@ def main() -> None:
         ("heldout", 900000, 905000) if args.heldout
         else ("heldout2", 950000, 955000) if args.heldout2
         else ("heldout3", 980000, 985000) if args.heldout3
+        else ("heldout4", 990000, 995000) if args.heldout4
         else ("tuning", 1000, 5000)
     )
     print(

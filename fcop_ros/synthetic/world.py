@@ -31,6 +31,13 @@ its depth field follows depth rather than the image (an error affine in disparit
 a random polynomial of the image coordinates; the global depth scale is redrawn in every frame
 about the sequence's; each object's NOCS bulge or shrink radially; and each instance's boundary
 is ragged (pixels on either side of it flipped at random) rather than moved as a whole.
+A fourth (``variant="heldout4"``, fixed on 23 Nov 2026 before that round's runs) errs in ways
+that follow the objects rather than the image: the coarsest depth field is a smooth function of
+each object's own surface (a quadratic in its true NOCS, so it moves with the object), the rest
+rings about a random centre of the image; each object's distance is misjudged anew in every frame;
+each object's NOCS are stretched or flattened along the direction they share with depth (the
+viewing axis), so the error turns with the view; masks are polygons with holes, as a detector's
+outlines are; and the NOCS are quantised to 8 bits, as an rgb8 NOCS image holds them.
 """
 from __future__ import annotations
 
@@ -175,9 +182,20 @@ def _poly_field(rng, h, w, cells):
     return (out - out.mean()) / max(out.std(), 1e-9)
 
 
-VARIANTS = ("tuning", "heldout", "heldout2", "heldout3")
+def _ring_field(rng, h, w, cells):
+    """Rings about a random centre of the image (a sum of cells + 1 radial cosines, about
+    cells rings across the image), zero mean and unit std."""
+    yy, xx = np.mgrid[0:h, 0:w] / max(h, w)
+    cy, cx = rng.uniform(0, h / max(h, w)), rng.uniform(0, w / max(h, w))
+    r = np.hypot(yy - cy, xx - cx)
+    out = sum(rng.normal() * np.cos(np.pi * cells * rng.uniform(0.5, 1.5) * r
+                                    + rng.uniform(0, 2 * np.pi)) for _ in range(cells + 1))
+    return (out - out.mean()) / max(out.std(), 1e-9)
+
+
+VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4")
 _FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field,
-           "heldout3": _poly_field}
+           "heldout3": _poly_field, "heldout4": _ring_field}
 
 
 @dataclass
@@ -226,6 +244,20 @@ class ErrorState:
             d = depth[ok]
             g[ok] = (d - d.mean()) / max(d.std(), 1e-9)
         return b * g
+
+    def _surface(self, rng, mask, nocs):
+        """Per object, a quadratic in its true NOCS ``nocs`` (zero mean and unit std over its
+        pixels, coefficients drifting as the fields do): a depth error attached to the object's
+        surface, which moves with it; 0 off the objects."""
+        g = np.zeros(mask.shape)
+        for iid in np.unique(mask[mask > 0]):
+            m = mask == iid
+            coef = self._drift(("surface", int(iid)), rng.normal(size=9))
+            q = nocs[m] - 0.5
+            x, y, z = q.T
+            v = np.stack([x, y, z, x * x, y * y, z * z, x * y, y * z, z * x], 1) @ coef
+            g[m] = (v - v.mean()) / max(v.std(), 1e-9)
+        return g
 
     def _object(self, iid, rng):
         """Per-object errors: the shape mismatch persists, the relief error drifts slowly."""
@@ -287,11 +319,19 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
     if state.variant == "heldout3" and e.depth_scale > 0:
         scale *= float(np.exp(rng.normal(0, e.depth_scale)))
     depth = depth * scale + state.offset
+    if state.variant == "heldout4" and e.depth_scale > 0:
+        # Each object's distance misjudged anew in every frame (its relief with it).
+        for iid in np.unique(mask[mask > 0]):
+            depth[mask == iid] *= float(np.exp(rng.normal(0, e.depth_scale / 5)))
     if e.field > 0:
         if state.variant == "heldout3":
             # The coarsest scale follows depth (an error affine in disparity), the rest the
             # image.
             total = state._disparity(rng, depth) + sum(
+                state._field(("depth", c), rng, h, w, c) for c in e.field_cells[1:])
+        elif state.variant == "heldout4":
+            # The coarsest scale follows each object's surface, the rest the image.
+            total = state._surface(rng, mask, frame.nocs) + sum(
                 state._field(("depth", c), rng, h, w, c) for c in e.field_cells[1:])
         else:
             total = sum(state._field(("depth", c), rng, h, w, c) for c in e.field_cells)
@@ -303,6 +343,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             nocs = _twist(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout3":
             nocs = _bulge(nocs, mask, state, rng, e.nocs_field)
+        elif state.variant == "heldout4":
+            nocs = _view_stretch(nocs, frame.depth, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout":
             # Scaled to ``nocs_field`` rms on the objects, as the other variants' distortions:
             # unscaled, q^T W q with |q| < 0.5 moved the NOCS 8x less than the tuning field.
@@ -332,6 +374,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         )
     depth[~np.isfinite(depth) | (depth <= 0)] = np.nan
     nocs[mask > 0] = np.clip(nocs[mask > 0], 0.0, 1.0)
+    if state.variant == "heldout4" and e.nocs_pixel > 0:
+        nocs = np.round(nocs * 255.0) / 255.0  # as an rgb8 NOCS image holds them
     nocs[mask == 0] = 0.0
     return replace(frame, depth=depth, nocs=nocs, mask=mask)
 
@@ -373,6 +417,44 @@ def _bulge(nocs, mask, state, rng, rms):
     return out
 
 
+def _view_stretch(nocs, depth, mask, state, rng, rms):
+    """Each object's NOCS stretched or flattened (per object, for the whole sequence) along the
+    NOCS direction that true ``depth`` follows on its pixels (the viewing axis in the object's
+    frame, so the error turns with the view), scaled to ``rms`` per NOCS axis."""
+    out = nocs.copy()
+    for iid in np.unique(mask[mask > 0]):
+        m = (mask == iid) & np.isfinite(depth)
+        if m.sum() < 4:
+            continue
+        sign = state.fields.get(("stretch", int(iid)))
+        if sign is None:
+            sign = float(rng.choice([-1.0, 1.0]))
+            state.fields[("stretch", int(iid))] = sign
+        q = nocs[m] - nocs[m].mean(0)
+        axis = np.linalg.lstsq(q, depth[m] - depth[m].mean(), rcond=None)[0]
+        if not np.linalg.norm(axis) > 0:
+            continue
+        axis /= np.linalg.norm(axis)
+        move = (q @ axis)[:, None] * axis
+        out[m] = nocs[m] + sign * rms * move / max(np.sqrt(np.mean(move ** 2)), 1e-9)
+    return out
+
+
+def _polygon(m, px, rng):
+    """Instance mask m as a detector outlines it: its outline simplified to a polygon (within
+    up to 2 ``px`` pixels), with up to two round holes of radius up to ``px`` inside."""
+    contours, _ = cv2.findContours(m.astype(np.uint8), cv2.RETR_EXTERNAL,
+                                   cv2.CHAIN_APPROX_NONE)
+    out = np.zeros(m.shape, np.uint8)
+    eps = float(rng.uniform(0.5, 2 * px))
+    cv2.fillPoly(out, [cv2.approxPolyDP(c, eps, True) for c in contours], 1)
+    inside = np.argwhere(cv2.erode(out, np.ones((2 * px + 3,) * 2, np.uint8)) > 0)
+    for _ in range(int(rng.integers(0, 3)) if len(inside) else 0):
+        y, x = inside[rng.integers(len(inside))]
+        cv2.circle(out, (int(x), int(y)), int(rng.integers(1, px + 1)), 0, -1)
+    return out
+
+
 def _ragged(m, px, rng):
     """Instance mask m with a ragged boundary: each pixel within r <= px of it (either side) is
     flipped with one probability up to three quarters per instance."""
@@ -384,9 +466,9 @@ def _ragged(m, px, rng):
 
 
 def _mask_errors(mask, nocs, px, rng, variant):
-    """Erode or dilate (``heldout2``: shift; ``heldout3``: fray) each instance by up to ``px``
-    pixels; grown pixels keep the background depth and take the nearest object's NOCS, as a
-    segmentation network's would."""
+    """Erode or dilate (``heldout2``: shift; ``heldout3``: fray; ``heldout4``: outline as a
+    polygon with holes) each instance by up to ``px`` pixels; grown pixels keep the background
+    depth and take the nearest object's NOCS, as a segmentation network's would."""
     shape = {"heldout": cv2.MORPH_ELLIPSE, "heldout3": cv2.MORPH_CROSS}.get(variant,
                                                                            cv2.MORPH_RECT)
     new = np.zeros_like(mask)
@@ -401,6 +483,8 @@ def _mask_errors(mask, nocs, px, rng, variant):
                                flags=cv2.INTER_NEAREST)
         elif variant == "heldout3":
             m = _ragged(m.astype(bool), int(rng.integers(1, px + 1)), rng)
+        elif variant == "heldout4":
+            m = _polygon(m, px, rng)
         elif r := int(rng.integers(-px, px + 1)):
             kern = cv2.getStructuringElement(shape, (2 * abs(r) + 1,) * 2)
             m = cv2.dilate(m, kern) if r > 0 else cv2.erode(m, kern)
