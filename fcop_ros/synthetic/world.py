@@ -37,7 +37,8 @@ each object's own surface (a quadratic in its true NOCS, so it moves with the ob
 rings about a random centre of the image; each object's distance is misjudged anew in every frame;
 each object's NOCS are stretched or flattened along the direction they share with depth (the
 viewing axis), so the error turns with the view; masks are polygons with holes, as a detector's
-outlines are; and the NOCS are quantised to 8 bits, as an rgb8 NOCS image holds them.
+outlines are; and, with per-pixel NOCS noise, the NOCS are quantised to 8 bits, as an rgb8 NOCS
+image holds them.
 """
 from __future__ import annotations
 
@@ -183,8 +184,8 @@ def _poly_field(rng, h, w, cells):
 
 
 def _ring_field(rng, h, w, cells):
-    """Rings about a random centre of the image (a sum of cells + 1 radial cosines, about
-    cells rings across the image), zero mean and unit std."""
+    """Rings about a random centre of the image (a sum of cells + 1 radial cosines, of about
+    cells / 2 periods across the image), zero mean and unit std."""
     yy, xx = np.mgrid[0:h, 0:w] / max(h, w)
     cy, cx = rng.uniform(0, h / max(h, w)), rng.uniform(0, w / max(h, w))
     r = np.hypot(yy - cy, xx - cx)
@@ -321,8 +322,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
     depth = depth * scale + state.offset
     if state.variant == "heldout4" and e.depth_scale > 0:
         # Each object's distance misjudged anew in every frame (its relief with it).
-        for iid in np.unique(mask[mask > 0]):
-            depth[mask == iid] *= float(np.exp(rng.normal(0, e.depth_scale / 5)))
+        for iid in np.unique(frame.mask[frame.mask > 0]):
+            depth[frame.mask == iid] *= float(np.exp(rng.normal(0, e.depth_scale / 5)))
     if e.field > 0:
         if state.variant == "heldout3":
             # The coarsest scale follows depth (an error affine in disparity), the rest the
@@ -331,7 +332,7 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
                 state._field(("depth", c), rng, h, w, c) for c in e.field_cells[1:])
         elif state.variant == "heldout4":
             # The coarsest scale follows each object's surface, the rest the image.
-            total = state._surface(rng, mask, frame.nocs) + sum(
+            total = state._surface(rng, frame.mask, frame.nocs) + sum(
                 state._field(("depth", c), rng, h, w, c) for c in e.field_cells[1:])
         else:
             total = sum(state._field(("depth", c), rng, h, w, c) for c in e.field_cells)
@@ -344,7 +345,7 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         elif state.variant == "heldout3":
             nocs = _bulge(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout4":
-            nocs = _view_stretch(nocs, frame.depth, mask, state, rng, e.nocs_field)
+            nocs = _view_stretch(nocs, frame, state, rng, e.nocs_field)
         elif state.variant == "heldout":
             # Scaled to ``nocs_field`` rms on the objects, as the other variants' distortions:
             # unscaled, q^T W q with |q| < 0.5 moved the NOCS 8x less than the tuning field.
@@ -417,24 +418,26 @@ def _bulge(nocs, mask, state, rng, rms):
     return out
 
 
-def _view_stretch(nocs, depth, mask, state, rng, rms):
+def _view_stretch(nocs, frame, state, rng, rms):
     """Each object's NOCS stretched or flattened (per object, for the whole sequence) along the
-    NOCS direction that true ``depth`` follows on its pixels (the viewing axis in the object's
-    frame, so the error turns with the view), scaled to ``rms`` per NOCS axis."""
+    NOCS direction that depth follows on the object (the viewing axis in its frame, from the
+    ``frame``'s truth, so the error turns with the view), scaled to ``rms`` per NOCS axis, on
+    the pixels the (true) instance covers."""
     out = nocs.copy()
-    for iid in np.unique(mask[mask > 0]):
-        m = (mask == iid) & np.isfinite(depth)
+    for iid in np.unique(frame.mask[frame.mask > 0]):
+        m = (frame.mask == iid) & np.isfinite(frame.depth)
         if m.sum() < 4:
             continue
         sign = state.fields.get(("stretch", int(iid)))
         if sign is None:
             sign = float(rng.choice([-1.0, 1.0]))
             state.fields[("stretch", int(iid))] = sign
-        q = nocs[m] - nocs[m].mean(0)
-        axis = np.linalg.lstsq(q, depth[m] - depth[m].mean(), rcond=None)[0]
+        truth = frame.nocs[m] - frame.nocs[m].mean(0)
+        axis = np.linalg.lstsq(truth, frame.depth[m] - frame.depth[m].mean(), rcond=None)[0]
         if not np.linalg.norm(axis) > 0:
             continue
         axis /= np.linalg.norm(axis)
+        q = nocs[m] - nocs[m].mean(0)
         move = (q @ axis)[:, None] * axis
         out[m] = nocs[m] + sign * rms * move / max(np.sqrt(np.mean(move ** 2)), 1e-9)
     return out
