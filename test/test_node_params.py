@@ -115,7 +115,9 @@ def test_a_parameter_the_node_does_not_have_is_named(harness, capfd):
         "window_frames?)" in err
     assert "parameter max_uncertanty is not one of this node's; ignored (did you mean " \
         "max_uncertainty?)" in err
-    assert "parameter qos_overrides./nope.subscription.depth is not one of this node's" in err
+    assert "parameter qos_overrides./nope.subscription.depth is not one of this node's; " \
+        "ignored (the topics that take QoS overrides: /camera_info_in, /depth, /mask, /nocs, " \
+        "/camera_info, /object_poses, /object_markers)" in err
     assert "parameter qos_overrides./depth.subscription.durability is not one of this " \
         "node's; ignored (QoS overrides take history, depth, reliability here)" in err
     assert err.count("is not one of this node's") == 4

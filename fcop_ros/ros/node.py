@@ -334,7 +334,12 @@ class FcopNode(Node):
             if not self.has_parameter(name):
                 close = difflib.get_close_matches(name, list(PARAMETERS), n=1)
                 policy = name.rsplit(".", 1)[-1]
-                if name.startswith("qos_overrides.") and (
+                if name.startswith("qos_overrides.") and policy in _QOS_OVERRIDABLE:
+                    topics = sorted(s.topic_name for s in self._subs + [self.sub_info_in])
+                    hint = (f" (the topics that take QoS overrides: {', '.join(topics)}, "
+                            f"{self.pub_info.topic_name}, {self.pub_poses.topic_name}, "
+                            f"{self.pub_markers.topic_name})")
+                elif name.startswith("qos_overrides.") and (
                         policy in _QOS_WORDS or policy in _QOS_INTEGERS):
                     hint = f" (QoS overrides take {', '.join(_QOS_OVERRIDABLE)} here)"
                 else:
@@ -551,7 +556,8 @@ class FcopNode(Node):
                 f"{INPUTS[i]} stamps before were at {_sec(ref)})",
             )
         if jumped:
-            self._forget_answers()
+            with self._pub_lock:
+                self._forget_answers_locked()
         for stamp_set, msgs in sets:
             self._check_frame_ids(msgs)
         for i, s, m in accepted:
@@ -610,14 +616,13 @@ class FcopNode(Node):
                 return
             self._publish_info(stamp, info, est.window, self._last_objects)
 
-    def _forget_answers(self) -> None:
-        """After a reset, stamps seen before may come again (a looped bag, a camera clock that
-        restarts): each gets its CameraInfo anew, and older stamps than the last answered one
-        are answered again."""
-        with self._pub_lock:
-            self._answered.clear()
-            self._unanswered.clear()
-            self._last_info_stamp = -1
+    def _forget_answers_locked(self) -> None:
+        """Under self._pub_lock. After a reset, stamps seen before may come again (a looped bag,
+        a camera clock that restarts): each gets its CameraInfo anew, and older stamps than the
+        last answered one are answered again."""
+        self._answered.clear()
+        self._unanswered.clear()
+        self._last_info_stamp = -1
 
     @staticmethod
     def _remember(od: OrderedDict, stamp: int, keep: int = 256) -> None:
@@ -873,7 +878,8 @@ class FcopNode(Node):
         with self._pub_lock:  # a new publisher: late joiners get nothing from before the reset
             self.destroy_publisher(self.pub_latest)
             self.pub_latest = self._latched_publisher()
-        self._forget_answers()
+            # In the same step: a frame taken before the reset finds its stamp gone.
+            self._forget_answers_locked()
         response.success = True
         response.message = "focal window, synchroniser, hand-off and latest_camera_info cleared"
         self._throttle.info("reset", "fcop_node: reset by service")
