@@ -33,12 +33,13 @@ about the sequence's; each object's NOCS bulge or shrink radially; and each inst
 is ragged (pixels on either side of it flipped at random) rather than moved as a whole.
 A fourth (``variant="heldout4"``, fixed on 23 Nov 2026 before that round's runs) errs in ways
 that follow the objects rather than the image: the coarsest depth field is a smooth function of
-each object's own surface (a quadratic in its true NOCS, so it moves with the object), the rest
-rings about a random centre of the image; each object's distance is misjudged anew in every frame;
-each object's NOCS are stretched or flattened along the direction they share with depth (the
-viewing axis), so the error turns with the view; masks are polygons with holes, as a detector's
-outlines are; and, with per-pixel NOCS noise, the NOCS are quantised to 8 bits, as an rgb8 NOCS
-image holds them.
+each object's own surface (a quadratic in its true NOCS, so it moves with the object, as large
+as the field's strength times the object's size), the rest rings about a random centre of the
+image; each object's distance is misjudged anew in every frame; each object's NOCS are
+stretched or flattened by up to 3 times the NOCS field's strength along the direction they
+share with depth (the viewing axis), so the error turns with the view; masks are polygons with
+holes, as a detector's outlines are; and, with per-pixel NOCS noise, the NOCS are quantised to 8
+bits, as an rgb8 NOCS image holds them.
 """
 from __future__ import annotations
 
@@ -246,18 +247,23 @@ class ErrorState:
             g[ok] = (d - d.mean()) / max(d.std(), 1e-9)
         return b * g
 
-    def _surface(self, rng, mask, nocs):
-        """Per object, a quadratic in its true NOCS ``nocs`` (zero mean and unit std over its
-        pixels, coefficients drifting as the fields do): a depth error attached to the object's
-        surface, which moves with it; 0 off the objects."""
-        g = np.zeros(mask.shape)
-        for iid in np.unique(mask[mask > 0]):
-            m = mask == iid
+    def _surface(self, rng, frame):
+        """Per object of ``frame`` (its truth), a quadratic in its NOCS (zero mean and unit std
+        over its pixels, coefficients drifting as the fields do) times the object's size over
+        its depth: a relative depth error attached to the object's surface, which moves with
+        it, as large in metres as the field's strength times the object's size (as the relief
+        family's error is relative to the object, not to its distance); 0 off the objects."""
+        g = np.zeros(frame.mask.shape)
+        size = {o.instance_id: o.scale for o in frame.objects}
+        for iid in np.unique(frame.mask[frame.mask > 0]):
+            m = (frame.mask == iid) & np.isfinite(frame.depth)
             coef = self._drift(("surface", int(iid)), rng.normal(size=9))
-            q = nocs[m] - 0.5
+            if not m.any():
+                continue
+            q = frame.nocs[m] - 0.5
             x, y, z = q.T
             v = np.stack([x, y, z, x * x, y * y, z * z, x * y, y * z, z * x], 1) @ coef
-            g[m] = (v - v.mean()) / max(v.std(), 1e-9)
+            g[m] = (v - v.mean()) / max(v.std(), 1e-9) * size[int(iid)] / frame.depth[m]
         return g
 
     def _object(self, iid, rng):
@@ -332,7 +338,7 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
                 state._field(("depth", c), rng, h, w, c) for c in e.field_cells[1:])
         elif state.variant == "heldout4":
             # The coarsest scale follows each object's surface, the rest the image.
-            total = state._surface(rng, frame.mask, frame.nocs) + sum(
+            total = state._surface(rng, frame) + sum(
                 state._field(("depth", c), rng, h, w, c) for c in e.field_cells[1:])
         else:
             total = sum(state._field(("depth", c), rng, h, w, c) for c in e.field_cells)
@@ -421,8 +427,9 @@ def _bulge(nocs, mask, state, rng, rms):
 def _view_stretch(nocs, frame, state, rng, rms):
     """Each object's NOCS stretched or flattened (per object, for the whole sequence) along the
     NOCS direction that depth follows on the object (the viewing axis in its frame, from the
-    ``frame``'s truth, so the error turns with the view), scaled to ``rms`` per NOCS axis, on
-    the pixels the (true) instance covers."""
+    ``frame``'s truth, so the error turns with the view) by a factor 1 +- 3 ``rms`` (+-9% at
+    the base bound, as the relief and shape families' +-10%), on the pixels the (true)
+    instance covers."""
     out = nocs.copy()
     for iid in np.unique(frame.mask[frame.mask > 0]):
         m = (frame.mask == iid) & np.isfinite(frame.depth)
@@ -439,7 +446,7 @@ def _view_stretch(nocs, frame, state, rng, rms):
         axis /= np.linalg.norm(axis)
         q = nocs[m] - nocs[m].mean(0)
         move = (q @ axis)[:, None] * axis
-        out[m] = nocs[m] + sign * rms * move / max(np.sqrt(np.mean(move ** 2)), 1e-9)
+        out[m] = nocs[m] + sign * 3.0 * rms * move
     return out
 
 
