@@ -301,6 +301,11 @@ def test_rate_window_spans_back_to_the_newest_reading_at_least_five_seconds_old(
     r = rw.add(9.0, 360, 150, 60, 400)  # now 3 s is: the reading at 0 s is forgotten
     assert r.span == 6.0 and r.matched == 270 and r.processed == 90 and r.skipped == 30
     assert r.answered == 400
+    # From the node's start, the first reading has rates (it read 0.00 Hz before); the second
+    # is taken against the first, as before.
+    rw = RateWindow(5.0, start=10.0)
+    assert rw.add(11.0, 30, 30, 0).frame_hz == 30.0
+    assert rw.add(12.0, 90, 90, 0).frame_hz == 60.0
 
 
 # ----- the DDS environment

@@ -72,16 +72,22 @@ class RateWindow:
     """Rates over about the last ``seconds``: keeps the readings of successive diagnostics
     messages and compares the newest with the oldest one still within reach."""
 
-    def __init__(self, seconds: float = 5.0):
+    def __init__(self, seconds: float = 5.0, start: float | None = None):
+        """``start``: when the counts were zero (the node's start): the first reading's rates
+        are taken since then, where they would otherwise have no span."""
         self.seconds = seconds
         self._samples: deque = deque()  # (time, matched, processed, skipped, answered)
+        self._start = start
 
     def add(self, now: float, matched: int, processed: int, skipped: int,
             answered: int = 0) -> Rates:
         self._samples.append((now, matched, processed, skipped, answered))
         while len(self._samples) > 1 and now - self._samples[1][0] >= self.seconds:
             self._samples.popleft()
-        t0, m0, p0, s0, a0 = self._samples[0]
+        first = self._samples[0]
+        if len(self._samples) == 1 and self._start is not None and self._start < now:
+            first = (self._start, 0, 0, 0, 0)
+        t0, m0, p0, s0, a0 = first
         return Rates(now - t0, matched - m0, processed - p0, skipped - s0, answered - a0)
 
 

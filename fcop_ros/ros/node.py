@@ -201,7 +201,8 @@ class FcopNode(Node):
         self.handoff_dropped = 0
         self.last_estimate = None  # the FocalEstimate of the newest processed frame
         self._proc_times: deque = deque(maxlen=200)
-        self._rates = RateWindow(5.0)  # frame and estimator rates over 5 s, for diagnostics
+        # Frame and estimator rates over 5 s, for diagnostics (the first reading: since start).
+        self._rates = RateWindow(5.0, start=self._now())
         self._throttle = LogThrottle(self.get_logger())
         self._lock = threading.Lock()
         self._pub_lock = threading.Lock()  # CameraInfo publication from the two threads
