@@ -9,6 +9,7 @@ words, a text rule) and the rules between parameters are checked here. No rclpy 
 
 from __future__ import annotations
 
+import operator
 import re
 from dataclasses import dataclass
 
@@ -284,19 +285,26 @@ def check_words(name: str, value) -> None:
         check_value(name, value)
 
 
+# Pairs of parameters one of which bounds the other: (lower, upper, the rule between their
+# values, the rule in words for each).
+_ORDERED_PAIRS = (
+    ("focal_min", "focal_max", operator.lt, "below", "above"),
+    ("min_frames", "window_frames", operator.le, "at most", "at least"),
+)
+
+
 def check_combination(p: dict, image_size=None, changed=()) -> str:
     """What is wrong with a complete set of values together ('' if nothing); ``image_size``
     (width, height), once known, bounds the principal point. Of two parameters in conflict,
     the message names the one being ``changed`` (the first of the pair if both or neither)."""
-    for low, high, rule in (("focal_min", "focal_max", "below"),
-                            ("min_frames", "window_frames", "at most")):
-        if (p[low] < p[high]) if rule == "below" else (p[low] <= p[high]):
+    for low, high, holds, low_rule, high_rule in _ORDERED_PAIRS:
+        if holds(p[low], p[high]):
             continue
         if high in changed and low not in changed:
-            other = "above" if rule == "below" else "at least"
-            return (f"parameter {high}={p[high]} is not allowed: it must be {other} "
+            return (f"parameter {high}={p[high]} is not allowed: it must be {high_rule} "
                     f"{low}={p[low]}")
-        return f"parameter {low}={p[low]} is not allowed: it must be {rule} {high}={p[high]}"
+        return (f"parameter {low}={p[low]} is not allowed: it must be {low_rule} "
+                f"{high}={p[high]}")
     if p["noise_bound_mode"] == "relative" and not 0 < p["noise_bound"] <= MAX_RELATIVE_BOUND:
         return (
             f"parameter noise_bound={p['noise_bound']} is not allowed: a fraction in "
