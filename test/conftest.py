@@ -5,18 +5,12 @@ the ROS harness (and its ``harness`` fixture, registered below) in ros_helpers."
 import numpy as np
 import pytest
 
-import os
+from fcop_ros.ros.dds import keep_on_this_machine, use_large_image_profile
 
-from fcop_ros.ros.dds import keep_on_this_machine, ros_distro, use_large_image_profile
-
-# Keep DDS traffic of every test on this machine and out of other runs' way, and use the
-# shipped Fast DDS profile (large images across processes) in this process and its children.
+# Keep DDS traffic of every test on this machine and out of other runs' way (a developer's
+# ROS_LOCALHOST_ONLY is dropped from Jazzy on: the start-up tests count stderr lines), and use
+# the shipped Fast DDS profile (large images across processes) in this process and its children.
 # Set before any test initialises rclpy: Fast DDS reads the profile file once per process.
-if ros_distro() not in ("humble", "iron"):
-    # A developer's ROS_LOCALHOST_ONLY=1: from Jazzy, rcl warns of it at every start of a
-    # process (the start-up tests count stderr lines) and it replaces the profile's transports
-    # (fcop_ros.ros.dds); the discovery range set below keeps DDS on this machine instead.
-    os.environ.pop("ROS_LOCALHOST_ONLY", None)
 keep_on_this_machine()
 use_large_image_profile()
 

@@ -312,10 +312,14 @@ def test_rate_window_spans_back_to_the_newest_reading_at_least_five_seconds_old(
 
 
 def test_keep_on_this_machine_sets_only_what_is_unset():
-    from fcop_ros.ros.dds import keep_on_this_machine, profile_env_vars, use_large_image_profile
+    from fcop_ros.ros.dds import (keep_on_this_machine, profile_env_vars, ros_distro,
+                                  use_large_image_profile)
 
     env = keep_on_this_machine({"ROS_DOMAIN_ID": "7"}, domain_id=99)
     assert env["ROS_DOMAIN_ID"] == "7" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    # ... except a developer's ROS_LOCALHOST_ONLY, which from Jazzy overrides the profile
+    env = keep_on_this_machine({"ROS_LOCALHOST_ONLY": "1"})
+    assert ("ROS_LOCALHOST_ONLY" in env) == (ros_distro() in ("humble", "iron"))
     assert keep_on_this_machine({}, domain_id=99)["ROS_DOMAIN_ID"] == "99"
     env = use_large_image_profile({})
     assert set(env) == set(profile_env_vars()) and all(v.endswith(".xml") for v in env.values())

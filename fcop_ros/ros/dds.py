@@ -46,15 +46,19 @@ def use_large_image_profile(env=None) -> dict:
 
 def keep_on_this_machine(env=None, domain_id: int | None = None) -> dict:
     """Keep DDS discovery on this machine and give the run a domain of its own (default: from
-    the process id), in ``env`` (default os.environ) unless already set; return it. Must happen
-    before the process initialises rclpy; child processes inherit it."""
+    the process id), in ``env`` (default os.environ) unless already set; return it. From Jazzy
+    on, a ROS_LOCALHOST_ONLY already set is removed (below). Must happen before the process
+    initialises rclpy; child processes inherit it."""
     env = os.environ if env is None else env
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     if ros_distro() in ("humble", "iron"):  # no discovery range before Jazzy
         env.setdefault("ROS_LOCALHOST_ONLY", "1")
-    # Jazzy still honours the deprecated ROS_LOCALHOST_ONLY, ahead of the discovery range, and
-    # then replaces the transports of the Fast DDS profile by UDP on loopback: 640x480 images
-    # sent best effort across processes got lost again (seen in CI). So it is not set from Jazzy.
+    else:
+        # Jazzy still honours the deprecated ROS_LOCALHOST_ONLY, ahead of the discovery range,
+        # and then replaces the transports of the Fast DDS profile by UDP on loopback: 640x480
+        # images sent best effort across processes got lost again (seen in CI). rcl also warns
+        # of it at every process start (one more stderr line). So it is not kept from Jazzy.
+        env.pop("ROS_LOCALHOST_ONLY", None)
     env.setdefault(
         "ROS_DOMAIN_ID", str(50 + os.getpid() % 150 if domain_id is None else domain_id)
     )
