@@ -232,6 +232,17 @@ class ErrorState:
         self.fields[key] = new
         return new
 
+    def _kept(self, key, draw):
+        """What ``key`` holds, drawn by ``draw()`` the first time it is asked for: an error
+        that persists for the whole sequence."""
+        if key not in self.fields:
+            self.fields[key] = draw()
+        return self.fields[key]
+
+    def _sign(self, key, rng):
+        """A sign of +-1 drawn once for ``key`` and kept for the sequence."""
+        return self._kept(key, lambda: float(rng.choice([-1.0, 1.0])))
+
     def _field(self, key, rng, h, w, cells):
         return self._drift(key, _FIELDS[self.variant](rng, h, w, cells))
 
@@ -395,11 +406,8 @@ def _twist(nocs, mask, state, rng, rms):
     out = nocs.copy()
     for iid in np.unique(mask[mask > 0]):
         m = mask == iid
-        axis = state.fields.get(("twist", int(iid)))
-        if axis is None:
-            axis = rng.normal(size=3)
-            axis /= np.linalg.norm(axis)
-            state.fields[("twist", int(iid))] = axis
+        axis = state._kept(("twist", int(iid)),
+                           lambda: (v := rng.normal(size=3)) / np.linalg.norm(v))
         q = nocs[m] - 0.5
         move = np.cross(axis, q) * (q @ axis)[:, None]
         out[m] = nocs[m] + rms * move / max(np.sqrt(np.mean(move ** 2)), 1e-9)
@@ -413,10 +421,7 @@ def _bulge(nocs, mask, state, rng, rms):
     out = nocs.copy()
     for iid in np.unique(mask[mask > 0]):
         m = mask == iid
-        sign = state.fields.get(("bulge", int(iid)))
-        if sign is None:
-            sign = float(rng.choice([-1.0, 1.0]))
-            state.fields[("bulge", int(iid))] = sign
+        sign = state._sign(("bulge", int(iid)), rng)
         q = nocs[m] - 0.5
         r2 = np.sum(q * q, axis=1)
         move = q * (r2 / max(r2.mean(), 1e-12) - 1.0)[:, None]
@@ -435,10 +440,7 @@ def _view_stretch(nocs, frame, state, rng, rms):
         m = (frame.mask == iid) & np.isfinite(frame.depth)
         if m.sum() < 4:
             continue
-        sign = state.fields.get(("stretch", int(iid)))
-        if sign is None:
-            sign = float(rng.choice([-1.0, 1.0]))
-            state.fields[("stretch", int(iid))] = sign
+        sign = state._sign(("stretch", int(iid)), rng)
         truth = frame.nocs[m] - frame.nocs[m].mean(0)
         axis = np.linalg.lstsq(truth, frame.depth[m] - frame.depth[m].mean(), rcond=None)[0]
         if not np.linalg.norm(axis) > 0:
