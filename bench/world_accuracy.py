@@ -143,6 +143,15 @@ def single_frames(presets, frames, first_seed, variant, have_colmap):
             )
 
 
+def _median_standard_error(err: np.ndarray) -> float:
+    """The standard error of err's median: the spread of the medians of 1000 bootstrap
+    resamples (seeded, so a table reads the same in every run); NaN without values."""
+    if err.size == 0:
+        return float("nan")
+    boot = np.random.default_rng(0).choice(err, (1000, err.size))
+    return float(np.std(np.median(boot, axis=1)))
+
+
 def bias(frames, first_seed, variant):
     print("\n| mechanism alone (strength up to) | signed median % | its standard error "
           "(bootstrap) | median abs error % | coverage |")
@@ -157,9 +166,8 @@ def bias(frames, first_seed, variant):
                 err.append(100 * e)
                 cover.append(abs(e) <= 2 * est.std_rel)
         err = np.array(err)
-        boot = np.random.default_rng(0).choice(err, (1000, err.size))
         print(f"| {fam} ({getattr(WORLD_PRESETS['only_' + fam], fam)}) | {np.median(err):+.2f} | "
-              f"{np.std(np.median(boot, axis=1)):.2f} | {np.median(np.abs(err)):.2f} | "
+              f"{_median_standard_error(err):.2f} | {np.median(np.abs(err)):.2f} | "
               f"{100 * np.mean(cover):.0f}% |", flush=True)
 
 
@@ -177,9 +185,8 @@ def preset_bias(presets, frames, first_seed, variant):
             if est.focal is not None:
                 err.append(100 * np.log(est.focal / fr.focal))
         err = np.array(err)
-        boot = np.random.default_rng(0).choice(err, (1000, err.size))
         print(f"| {preset} | {err.size} | {np.median(err):+.2f} | "
-              f"{np.std(np.median(boot, axis=1)):.2f} | {np.mean(err):+.2f} | "
+              f"{_median_standard_error(err):.2f} | {np.mean(err):+.2f} | "
               f"{np.std(err) / np.sqrt(err.size):.2f} |", flush=True)
 
 
