@@ -34,7 +34,7 @@ def test_no_focal_without_evidence():
     w2 = FocalWindow(WindowOptions(min_frames=3))
     w2.add(estimate(600.0), 0.0)
     r = w2.add(estimate(600.0), 0.1)
-    assert r.focal is None and "2 of 3" in r.reason
+    assert r.focal is None and "2 frames with focal evidence (min_frames 3)" in r.reason
     assert w2.add(estimate(600.0), 0.2).focal is not None
     w3 = FocalWindow(WindowOptions(min_window_votes=1000))
     assert w3.add(estimate(600.0, support=400), 0.0).focal is None
@@ -332,6 +332,43 @@ def test_image_size_change_starts_a_new_window():
         w.add(estimate(600.0), k / 30)
     r = w.add(estimate(300.0, size=(320, 240)), 1.0)
     assert r.changed and r.frames == 1 and r.focal == pytest.approx(300.0)
+
+
+def test_a_frame_of_another_size_without_evidence_does_not_end_the_window():
+    """As in fcop_node: one stray frame without a focal length is not added; the window keeps
+    its frames and its focal (before, it emptied the window)."""
+    w = FocalWindow()
+    for k in range(10):
+        w.add(estimate(600.0), k / 30)
+    stray = FocalEstimate(None, (4.5, 4.5), (10, 10), reason="nothing")
+    r = w.add(stray, 0.4)
+    assert r.focal == pytest.approx(600.0) and r.frames == 10 and not r.changed
+
+
+def test_estimates_without_std_rel_are_named_as_why_there_is_no_focal():
+    """method="ransac", refine=False and the paper's method give no std_rel; the window weighs
+    frames by it, so it reports none and says why."""
+    w = FocalWindow()
+    for k in range(12):
+        r = w.add(estimate(600.0, std_rel=None), k / 30)
+    assert r.focal is None and "12 estimates had a focal but no std_rel" in r.reason
+    w.reset()
+    assert "no std_rel" not in w.add(empty_estimate(), 1.0).reason
+
+
+def test_stamps_must_be_finite_numbers_that_do_not_go_back():
+    w = FocalWindow(WindowOptions(max_age=1.0))
+    w.add(estimate(600.0), 5.0)
+    w.add(estimate(600.0), 5.0)  # the same instant is allowed
+    with pytest.raises(ValueError, match="reset"):
+        w.add(estimate(600.0), 4.9)
+    with pytest.raises(ValueError, match="finite"):
+        w.add(estimate(600.0), float("nan"))
+    with pytest.raises(TypeError, match="seconds"):
+        w.add(estimate(600.0), "6")
+    assert len(w) == 2
+    w.reset()
+    assert w.add(estimate(600.0), 0.0).frames == 1
 
 
 def test_max_frames_max_age_and_reset():

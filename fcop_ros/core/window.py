@@ -56,8 +56,9 @@ A change of image size starts a new window. The settings are a :class:`WindowOpt
 
 from __future__ import annotations
 
+import numbers
 from collections import Counter, deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -108,6 +109,7 @@ class FocalWindow:
             raise TypeError("FocalWindow takes a WindowOptions, e.g. "
                             "FocalWindow(WindowOptions(max_frames=30))")
         self._frames: deque[_Frame] = deque()
+        self._unweighed = 0  # estimates with a focal but no std_rel, since the last reset
         self.current = WindowEstimate(None, reason="no frames yet")
         self.changes = 0
 
@@ -117,17 +119,39 @@ class FocalWindow:
     def reset(self) -> None:
         """Forget every frame (e.g. after a known lens change or a looped bag)."""
         self._frames.clear()
+        self._unweighed = 0
         self.current = WindowEstimate(None, reason="window reset")
 
     def add(self, estimate: FocalEstimate, stamp: float) -> WindowEstimate:
-        """Add one frame's estimate taken at ``stamp`` (seconds); return the window's estimate."""
+        """Add one frame's estimate taken at ``stamp`` (seconds); return the window's estimate.
+
+        A frame of another image size starts a new window if it has a focal length; one
+        without is not added (one bad frame does not end a window), as in ``fcop_node``.
+        Stamps must be finite and must not go back (``reset()`` after a time jump): a raise
+        otherwise, since ``max_age`` and the order of the frames rest on them. An estimate
+        without ``std_rel`` (``method="ransac"``, ``refine=False``, the paper's method) is
+        kept as a frame without evidence: the window weighs frames by it."""
+        if not isinstance(stamp, numbers.Real):
+            raise TypeError(f"stamp must be a number of seconds, got {stamp!r}")
+        stamp = float(stamp)
+        if not np.isfinite(stamp):
+            raise ValueError(f"stamp must be finite, got {stamp}")
+        if self._frames and stamp < self._frames[-1].stamp:
+            raise ValueError(
+                f"stamp {stamp} is before the newest frame's ({self._frames[-1].stamp}); "
+                "call reset() after a jump back in time"
+            )
         size = tuple(estimate.image_size) if estimate.image_size else None
         new_size = (
             bool(self._frames) and size is not None and self._frames[-1].size not in (None, size)
         )
+        if new_size and estimate.focal is None:
+            return replace(self.current, changed=False)
         if new_size:
             self._frames.clear()
         ok = estimate.focal is not None and estimate.std_rel is not None and estimate.std_rel > 0
+        if estimate.focal is not None and not ok:
+            self._unweighed += 1
         var = float(estimate.std_rel) ** 2 if ok else np.inf
         noise = estimate.std_rel_noise
         noise = min(float(noise) ** 2, var) if ok and noise is not None and noise > 0 else var
@@ -247,13 +271,13 @@ class FocalWindow:
         rated, y, v, noise = self._rated()
         n_all = len(self._frames)
         support = int(sum(f.support for f in rated))
-        if y.size < self.options.min_frames:
-            return WindowEstimate(
-                None,
-                frames=n_all,
-                support=support,
-                reason=f"{y.size} of {self.options.min_frames} frames with focal evidence",
-            )
+        if y.size < self.options.min_frames or y.size == 0:
+            why = (f"{y.size} frames with focal evidence (min_frames "
+                   f"{self.options.min_frames})")
+            if self._unweighed:
+                why += (f"; {self._unweighed} estimates had a focal but no std_rel "
+                        "(method='ransac' or refine=False), which the window weighs frames by")
+            return WindowEstimate(None, frames=n_all, support=support, reason=why)
         if support < self.options.min_window_votes:
             return WindowEstimate(
                 None,
