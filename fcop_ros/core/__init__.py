@@ -1,6 +1,7 @@
 """The fCOP estimator as plain numpy/scipy (no rclpy): solver, stabbing, correspondences,
 per-object fits and their combination, frame estimate, poses and the sliding window."""
 
+from .compiled import warm_up
 from .correspondences import Instance, extract_instances
 from .estimator import FocalEstimate, estimate_focal, estimate_poses
 from .options import PAPER_FCOP_IS, EstimatorOptions, NoiseBound, WindowOptions
@@ -29,4 +30,5 @@ __all__ = [
     "interval_stabbing",
     "FocalWindow",
     "WindowEstimate",
+    "warm_up",
 ]

@@ -1,7 +1,32 @@
 """Camera conventions every layer shares, so that each is written once."""
+import math
 
 
 def image_centre(width: int, height: int) -> tuple[float, float]:
     """The principal point assumed when none is given: the image centre, with pixel centres at
     integer coordinates (REP-104 / OpenCV)."""
     return (width - 1) / 2.0, (height - 1) / 2.0
+
+
+def inside_image(cx: float, cy: float, width: int, height: int) -> bool:
+    """Whether a principal point (cx, cy) lies on the image (pixel centres 0 .. W-1, 0 .. H-1)."""
+    return 0 <= cx <= width - 1 and 0 <= cy <= height - 1
+
+
+def checked_principal_point(principal_point, width: int, height: int) -> tuple[float, float]:
+    """(cx, cy) as floats, or a ValueError naming what is wrong: anything but two finite numbers
+    on the image (a principal point off the image is a slip, e.g. (cy, cx) or a crop's)."""
+    try:
+        cx, cy = (float(v) for v in principal_point)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"principal_point must be two numbers (cx, cy) in pixels, got {principal_point!r}"
+        ) from None
+    if not (math.isfinite(cx) and math.isfinite(cy)):
+        raise ValueError(f"principal_point must be finite, got ({cx}, {cy})")
+    if not inside_image(cx, cy, width, height):
+        raise ValueError(
+            f"principal point ({cx}, {cy}) is outside the {width}x{height} image (cx is along "
+            "the width, cy along the height)"
+        )
+    return cx, cy

@@ -91,6 +91,12 @@ def check_images(depth, nocs, mask):
                          f"mask {mask.shape}")
     if not _numeric(depth.dtype):
         raise ValueError(f"depth must be numeric, got dtype {depth.dtype}")
+    if depth.dtype.kind in "iu":
+        raise ValueError(
+            f"depth has integer dtype {depth.dtype}: metres are expected, as floats. A 16UC1 "
+            "depth image is millimetres (REP-118): pass depth / 1000.0 (msg_adapters converts "
+            "ROS images)"
+        )
     if not _numeric(nocs.dtype):
         raise ValueError(f"nocs must be numeric, got dtype {nocs.dtype}")
     if mask.dtype == bool:
@@ -98,6 +104,37 @@ def check_images(depth, nocs, mask):
     if not (mask.dtype.kind in "iu" or np.issubdtype(mask.dtype, np.integer)):
         raise ValueError(f"mask must hold integer instance ids, got dtype {mask.dtype}")
     return depth, nocs, mask
+
+
+NOCS_TOLERANCE = 0.05  # NOCS this far outside [0, 1] still count as in range
+
+
+def nocs_range(nocs, mask, stride: int = 8):
+    """(share, sampled, low, high) of the object pixels on every ``stride``-th row and column
+    that carry a prediction (finite, not all zero): the share whose NOCS lie outside [0, 1]
+    beyond NOCS_TOLERANCE, their number, and the smallest and largest value among them. A few
+    microseconds on 640x480, so every frame is checked: pixels out of range are dropped one by
+    one, and NOCS in another convention (centred, 8-bit) would otherwise leave a biased rest."""
+    sub = mask[::stride, ::stride]
+    at = np.flatnonzero(sub > 0)
+    on = nocs[at // sub.shape[1] * stride, at % sub.shape[1] * stride]
+    lo, hi = on.min(1), on.max(1)
+    keep = np.isfinite(lo) & np.isfinite(hi) & ((lo != 0) | (hi != 0))
+    lo, hi = lo[keep], hi[keep]
+    if not len(lo):
+        return 0.0, 0, 0.0, 0.0
+    out = (lo < -NOCS_TOLERANCE) | (hi > 1 + NOCS_TOLERANCE)
+    return float(np.count_nonzero(out)) / len(lo), len(lo), float(lo.min()), float(hi.max())
+
+
+def nocs_range_hint(low: float, high: float) -> str:
+    """What NOCS values spanning [low, high] suggest, for a reason: 8-bit, centred or other."""
+    if high > 1.5:
+        return f"NOCS values reach {high:.4g}; they must lie in [0, 1]: divide 8-bit NOCS by 255"
+    if low < -NOCS_TOLERANCE and high <= 0.5 + NOCS_TOLERANCE:
+        return (f"NOCS values span [{low:.3g}, {high:.3g}]; they must lie in [0, 1]: centred "
+                "NOCS (in [-0.5, 0.5])? add 0.5")
+    return f"NOCS values span [{low:.3g}, {high:.3g}]; they must lie in [0, 1]"
 
 
 def _numeric(dtype) -> bool:
@@ -261,7 +298,7 @@ def _band_means(w: np.ndarray, bands, vals: np.ndarray):
 
 def extract_instances(depth, nocs, mask, principal_point=None, *, min_object_pixels: int = 50,
                       erode_px: int = 1, denoise_radius: int = 2, outlier_sigma: float = 4.0,
-                      max_pixels: int = 2000, nocs_tolerance: float = 0.05,
+                      max_pixels: int = 2000, nocs_tolerance: float = NOCS_TOLERANCE,
                       noise_floor: float = 5e-4,
                       edge_sigma: float = 0.0, max_instances: int | None = None,
                       rng: np.random.Generator | None = None):

@@ -18,8 +18,16 @@ import numpy as np
 
 from . import compiled
 from .combine import combine_objects
-from .camera import image_centre
-from .correspondences import Instance, calibrated_nocs, check_images, extract_instances
+from .camera import checked_principal_point, image_centre
+from .correspondences import (
+    NOCS_TOLERANCE,
+    Instance,
+    calibrated_nocs,
+    check_images,
+    extract_instances,
+    nocs_range,
+    nocs_range_hint,
+)
 from .error_model import depth_influence, object_variances
 from .object_fit import fit_objects
 from .pose import ObjectPose, umeyama
@@ -32,7 +40,7 @@ from .stabbing import interval_stabbing, stab_equal_width
 _DEFAULT_OPTIONS = EstimatorOptions()
 
 
-@dataclass
+@dataclass(eq=False)
 class FocalEstimate:
     """Result of :func:`estimate_focal`.
 
@@ -57,7 +65,10 @@ class FocalEstimate:
     moving the camera or the object does not (the depth makes up for the image size), so the
     window tells a zoom from frames whose errors moved by it. object_radii: the same objects'
     RMS image radius alone (px), which a depth network's frame-to-frame change of scale does
-    not move.
+    not move. image_size: (width, height), as in CameraInfo (numpy's shape is (height, width)).
+    std_rel and std_rel_noise are None where the estimate has no per-object fit to draw them
+    from: ``method="ransac"``, ``refine=False``, ``PAPER_FCOP_IS``. Two estimates compare equal
+    only if they are the same object.
     """
 
     focal: float | None
@@ -110,15 +121,26 @@ def _radius_depth_kernel(x, d):
     return np.sqrt(s / n), np.median(d)
 
 
-def _no_instance_reason(nocs, mask, opt: EstimatorOptions) -> str:
-    """Why no instance was usable, naming NOCS given in 0..255 instead of [0, 1] (a common
-    slip that otherwise reads as empty masks)."""
+def _no_instance_reason(depth, nocs, mask, opt: EstimatorOptions) -> str:
+    """Why no instance was usable, naming the input that lacks what it needs (an empty mask,
+    no valid depth or no NOCS prediction on the objects, NOCS outside [0, 1]) before the pixel
+    count."""
+    on = mask > 0
+    if not on.any():
+        return "the mask has no instance (no id above 0)"
+    d = depth[on]
+    depth_ok = np.isfinite(d) & (d > 0)
+    if not depth_ok.any():
+        return "the depth is invalid (NaN, inf or <= 0) on every object pixel"
+    p = nocs[on]
+    predicted = np.isfinite(p).all(1) & (p != 0).any(1)
+    if not predicted.any():
+        return "the NOCS are zero or not finite (no prediction) on every object pixel"
     reason = f"no instance with >= {opt.min_object_pixels} valid pixels"
-    on = nocs[mask > 0]
-    top = float(np.max(on, initial=0.0, where=np.isfinite(on)))
-    if top > 1.5:
-        reason += (f" (NOCS values reach {top:.4g} on the objects; they must lie in [0, 1]: "
-                   "divide 8-bit NOCS by 255)")
+    top = float(np.max(p[predicted]))
+    low = float(np.min(p[predicted]))
+    if top > 1 + NOCS_TOLERANCE or low < -NOCS_TOLERANCE:
+        reason += f" ({nocs_range_hint(low, top)})"
     return reason
 
 
@@ -228,9 +250,15 @@ def estimate_poses(
     fixed focal length, all instances fitted in one batch; instances whose NOCS fit only as a
     reflection get none. ``rng`` draws the fit's pixel subsets (default: a fixed seed).
     """
+    try:
+        focal = float(focal)
+    except (TypeError, ValueError):
+        raise TypeError(f"focal must be a number of pixels, got {focal!r}") from None
+    if not (np.isfinite(focal) and focal > 0):
+        raise ValueError(f"focal must be a finite number of pixels > 0, got {focal}")
     if not instances:
         return []
-    fits = fit_objects(instances, float(focal), fix_focal=True, proper=True, iterations=6, rng=rng)
+    fits = fit_objects(instances, focal, fix_focal=True, proper=True, iterations=6, rng=rng)
     skip = set(exclude)
     return [
         ObjectPose(
@@ -252,7 +280,9 @@ def estimate_poses(
 
 def _ransac(instances, opt, rng):
     """The paper's fCOP-RANSAC: a triplet gives f and, by Umeyama on its three points, a pose;
-    the hypothesis with most pixels within ``ransac_threshold`` metres of its object wins."""
+    the hypothesis with most pixels within ``ransac_threshold`` of its object wins. The paper's
+    threshold is in metres; here it is relative to the object's median depth (0.005: 5 mm at
+    1 m), so that a depth in other units, or a depth network's global scale, leaves f alone."""
     lo, hi = opt.focal_range
     nh = int(opt.ransac_hypotheses)
     owner = rng.integers(0, len(instances), nh)
@@ -299,7 +329,9 @@ def _ransac(instances, opt, rng):
     )
     pred = s[:, None, None] * np.einsum("hij,hnj->hni", R, P[owner[h]] - 0.5) + t[:, None, :]
     res = np.linalg.norm(pts - pred, axis=-1)
-    score = ((res < opt.ransac_threshold) & M[owner[h]]).sum(1) / np.maximum(n_o[owner[h]], 1)
+    depth_median = np.array([np.median(inst.d) for inst in instances])
+    near = res < opt.ransac_threshold * depth_median[owner[h]][:, None]
+    score = (near & M[owner[h]]).sum(1) / np.maximum(n_o[owner[h]], 1)
     best = int(np.argmax(score))
     return float(f[h[best]]), int(round(score[best] * n_o[owner[h[best]]])), owner
 
@@ -337,10 +369,16 @@ def estimate_focal(
     depth, nocs, mask = check_images(depth, nocs, mask)
     h, w = depth.shape
     pp = (
-        image_centre(w, h) if principal_point is None else tuple(float(v) for v in principal_point)
+        image_centre(w, h) if principal_point is None
+        else checked_principal_point(principal_point, w, h)
     )
     rng = np.random.default_rng(seed)
     base = dict(principal_point=pp, image_size=(w, h), method=opt.method)
+    share, sampled, low, high = nocs_range(nocs, mask)
+    if sampled >= 20 and share > 0.2:
+        return FocalEstimate(None, reason=(
+            f"NOCS outside [0, 1] on {share:.0%} of the object pixels sampled "
+            f"({nocs_range_hint(low, high)})"), **base)
     instances = extract_instances(
         depth,
         nocs,
@@ -356,7 +394,7 @@ def estimate_focal(
         rng=rng,
     )
     if not instances:
-        return FocalEstimate(None, reason=_no_instance_reason(nocs, mask, opt), **base)
+        return FocalEstimate(None, reason=_no_instance_reason(depth, nocs, mask, opt), **base)
     base["instances_skipped"] = getattr(instances, "skipped", 0)
 
     if opt.method == "ransac":
@@ -443,9 +481,9 @@ def estimate_focal(
         inst.instance_id for k, inst in enumerate(support) if good[k] and fits.mirrored[k]
     ]
     if not good.any():
-        est.reason = "no object whose NOCS explain its shape: " + "; ".join(
-            f"{i}: {why}" for i, why in est.rejected.items()
-        )
+        why = [f"{i}: {r}" for i, r in est.rejected.items()]
+        more = f"; and {len(why) - 8} more (see rejected)" if len(why) > 8 else ""
+        est.reason = "no object whose NOCS explain its shape: " + "; ".join(why[:8]) + more
         return est
     # Errors that repeat in every frame show in no residual: their share of each object's
     # variance follows from the fit's lean on depth and on the NOCS (.error_model).

@@ -81,7 +81,8 @@ class EstimatorOptions:
     ``pose_max_std``.
 
     ``method``: "stabbing" (the paper's fCOP-IS) or "ransac" (fCOP-RANSAC, ``ransac_hypotheses``
-    hypotheses, inlier threshold ``ransac_threshold`` metres).
+    hypotheses, inlier threshold ``ransac_threshold`` relative to each object's median depth;
+    the paper's is in metres, the same at 1 m).
     """
 
     triplets_per_object: int = 1500
@@ -119,20 +120,45 @@ class EstimatorOptions:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
         if not isinstance(self.noise_bound, NoiseBound):
             raise TypeError("noise_bound must be a NoiseBound")
-        for name in (
-            "triplets_per_object",
-            "min_object_pixels",
-            "max_instances",
-            "max_pixels",
-            "fit_pixels",
-            "fit_iterations",
-            "ransac_hypotheses",
-        ):
-            if not getattr(self, name) >= 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("unseen_depth_error", "shape_error", "object_tau"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        for name, low in _EST_INTEGERS.items():
+            _check_integer(self, name, low)
+        for name, (low, high) in _EST_NUMBERS.items():
+            _check_number(self, name, low, high)
+        for name in ("refine", "depth_tilt"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
+
+
+# Each setting's rule, so that a wrong value fails where it is set: integers at least this ...
+_EST_INTEGERS = {
+    "triplets_per_object": 1, "min_object_pixels": 1, "max_instances": 1, "max_pixels": 1,
+    "fit_pixels": 1, "fit_iterations": 1, "ransac_hypotheses": 1, "min_frame_votes": 0,
+    "erode_px": 0, "denoise_radius": 0,
+}
+# ... and numbers within [low, high] (0 switches the outlier and edge tests off).
+_EST_NUMBERS = {
+    "min_inlier_ratio": (0.0, 1.0), "min_fit_quality": (0.0, 1.0),
+    "min_nocs_spread": (0.0, np.inf), "outlier_sigma": (0.0, np.inf),
+    "edge_sigma": (0.0, np.inf), "unseen_depth_error": (0.0, np.inf),
+    "shape_error": (0.0, np.inf), "object_tau": (0.0, np.inf),
+    "object_tau_weight": (0.0, np.inf), "pose_max_std": (0.0, np.inf),
+    "ransac_threshold": (1e-12, np.inf),
+}
+
+
+def _check_integer(options, name: str, low: int) -> None:
+    """A ValueError unless ``options.name`` is an integer >= ``low`` (not a bool or a float)."""
+    v = getattr(options, name)
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < low:
+        raise ValueError(f"{name} must be an integer >= {low}, got {v!r}")
+
+
+def _check_number(options, name: str, low: float, high: float) -> None:
+    """A ValueError unless ``options.name`` is a number in [low, high] (NaN is not)."""
+    v = getattr(options, name)
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.number)) or not (
+            low <= v <= high):
+        raise ValueError(f"{name} must be a number in [{low:g}, {high:g}], got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -155,14 +181,13 @@ class WindowOptions:
     reject_sigma: float = 4.0
 
     def __post_init__(self):
-        if self.max_frames < 1:
-            raise ValueError("max_frames must be >= 1")
+        for name, low in (("max_frames", 1), ("min_frames", 1), ("min_window_votes", 0),
+                          ("change_frames", 1)):
+            _check_integer(self, name, low)
         if not 1 <= self.min_frames <= self.max_frames:
             raise ValueError("min_frames must be in 1..max_frames (the window holds no more)")
         if self.max_age is not None and not self.max_age > 0:
             raise ValueError("max_age must be > 0 seconds or None")
-        if self.change_frames < 1:
-            raise ValueError("change_frames must be >= 1")
         if not (self.change_threshold > 0 and self.change_sigma > 0 and self.reject_sigma > 0):
             raise ValueError("change_threshold, change_sigma and reject_sigma must be > 0")
 

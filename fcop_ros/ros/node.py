@@ -59,7 +59,7 @@ from msg_adapters import (
 )
 
 from ..core import FocalWindow, compiled, estimate_focal, estimate_poses
-from ..core.camera import image_centre
+from ..core.camera import image_centre, inside_image
 from .allocator import limit_allocator_arenas
 from .calibration import default_calibration_path, write_calibration
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
@@ -487,7 +487,7 @@ class FcopNode(Node):
             p[name] if p[name] >= 0 else default
             for name, default in zip(("principal_point_x", "principal_point_y"), fallback)
         )
-        if not (0 <= cx <= w - 1 and 0 <= cy <= h - 1):
+        if not inside_image(cx, cy, w, h):
             raise _Reject(
                 "principal_point_outside",
                 f"principal point ({cx}, {cy}) is outside the {w}x{h} image",
