@@ -97,6 +97,7 @@ class _Frame:
     size: tuple | None
     extents: dict
     radii: dict
+    unweighed: bool = False  # a focal without std_rel
 
 
 class FocalWindow:
@@ -109,7 +110,6 @@ class FocalWindow:
             raise TypeError("FocalWindow takes a WindowOptions, e.g. "
                             "FocalWindow(WindowOptions(max_frames=30))")
         self._frames: deque[_Frame] = deque()
-        self._unweighed = 0  # estimates with a focal but no std_rel, since the last reset
         self.current = WindowEstimate(None, reason="no frames yet")
         self.changes = 0
 
@@ -119,7 +119,6 @@ class FocalWindow:
     def reset(self) -> None:
         """Forget every frame (e.g. after a known lens change or a looped bag)."""
         self._frames.clear()
-        self._unweighed = 0
         self.current = WindowEstimate(None, reason="window reset")
 
     def add(self, estimate: FocalEstimate, stamp: float) -> WindowEstimate:
@@ -150,8 +149,6 @@ class FocalWindow:
         if new_size:
             self._frames.clear()
         ok = estimate.focal is not None and estimate.std_rel is not None and estimate.std_rel > 0
-        if estimate.focal is not None and not ok:
-            self._unweighed += 1
         var = float(estimate.std_rel) ** 2 if ok else np.inf
         noise = estimate.std_rel_noise
         noise = min(float(noise) ** 2, var) if ok and noise is not None and noise > 0 else var
@@ -165,6 +162,7 @@ class FocalWindow:
                 size,
                 _log_sizes(estimate.object_extents) if ok else {},
                 _log_sizes(estimate.object_radii) if ok else {},
+                estimate.focal is not None and not ok,
             )
         )
         while len(self._frames) > self.options.max_frames:
@@ -274,8 +272,9 @@ class FocalWindow:
         if y.size < self.options.min_frames or y.size == 0:
             why = (f"{y.size} frames with focal evidence (min_frames "
                    f"{self.options.min_frames})")
-            if self._unweighed:
-                why += (f"; {self._unweighed} estimates had a focal but no std_rel "
+            unweighed = sum(f.unweighed for f in self._frames)
+            if unweighed:
+                why += (f"; {unweighed} of its frames have a focal but no std_rel "
                         "(method='ransac' or refine=False), which the window weighs frames by")
             return WindowEstimate(None, frames=n_all, support=support, reason=why)
         if support < self.options.min_window_votes:
