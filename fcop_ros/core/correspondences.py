@@ -117,8 +117,14 @@ def nocs_range(nocs, mask, stride: int = 8):
     one, and NOCS in another convention (centred, 8-bit) would otherwise leave a biased rest."""
     sub = mask[::stride, ::stride]
     at = np.flatnonzero(sub > 0)
-    on = nocs[at // sub.shape[1] * stride, at % sub.shape[1] * stride]
-    lo, hi = on.min(1), on.max(1)
+    rows, cols = at // sub.shape[1] * stride, at % sub.shape[1] * stride
+    if nocs.flags.c_contiguous:
+        on = np.take(nocs.reshape(-1, 3), rows * nocs.shape[1] + cols, axis=0)
+    else:
+        on = nocs[rows, cols]
+    # Per pixel, numpy's min and max over an axis of three cost 20 times these.
+    lo = np.minimum(np.minimum(on[:, 0], on[:, 1]), on[:, 2])
+    hi = np.maximum(np.maximum(on[:, 0], on[:, 1]), on[:, 2])
     keep = np.isfinite(lo) & np.isfinite(hi) & ((lo != 0) | (hi != 0))
     lo, hi = lo[keep], hi[keep]
     if not len(lo):
