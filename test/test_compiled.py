@@ -81,3 +81,21 @@ def test_float32_images_read_as_they_are(monkeypatch):
                    and np.array_equal(pa.translation, pb.translation) and pa.scale == pb.scale
                    for pa, pb in zip(a.objects, b.objects, strict=True))
     assert correspondences._crop_kernel.signatures == before
+
+
+def test_flatness_agrees(monkeypatch):
+    """The NOCS and pixel shape ratios that refuse a flat NOCS (estimator._flatness), kernel
+    and numpy, on the instances of world frames (flat ones included)."""
+    from fcop_ros.core.correspondences import calibrated_nocs, extract_instances
+    from fcop_ros.core.estimator import _flatness
+
+    insts = []
+    for k, fr in enumerate(_frames()[:8]):
+        nocs = fr.nocs.copy()
+        if k % 2:
+            nocs[..., k % 3] = np.where((fr.nocs != 0).any(2), 0.5, 0.0)
+        insts.append([calibrated_nocs(i) for i in extract_instances(
+            fr.depth, nocs, fr.mask, rng=np.random.default_rng(k))])
+    fast, slow = _both_ways(monkeypatch, lambda: [_flatness(i, 600.0) for i in insts if i])
+    for a, b in zip(fast, slow):
+        np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9)
