@@ -339,6 +339,19 @@ def test_depth_as_integers_and_a_bad_principal_point_are_refused():
         300.0, 250.0)
 
 
+def test_mask_ids_beyond_signed_64_bits_are_refused():
+    """Before, uint64 ids of 2**63 and above read as background ('no instance with >= 50 valid
+    pixels'); ids below that are taken as they are."""
+    fr = clean_frame(0)
+    huge = fr.mask.astype(np.uint64)
+    huge[huge > 0] += np.uint64(2**63)
+    with pytest.raises(ValueError, match="2\\*\\*63"):
+        estimate_focal(fr.depth, fr.nocs, huge, seed=0)
+    large = fr.mask.astype(np.uint64)
+    large[large > 0] += np.uint64(2**40)
+    assert estimate_focal(fr.depth, fr.nocs, large, seed=0, poses=False).focal
+
+
 def test_estimate_poses_refuses_a_focal_that_is_no_focal():
     """Before, 0, -600, NaN and inf gave [] without a word and None a bare TypeError."""
     fr = clean_frame(0)

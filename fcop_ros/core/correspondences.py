@@ -103,6 +103,10 @@ def check_images(depth, nocs, mask):
         mask = mask.astype(np.int32)
     if not (mask.dtype.kind in "iu" or np.issubdtype(mask.dtype, np.integer)):
         raise ValueError(f"mask must hold integer instance ids, got dtype {mask.dtype}")
+    if mask.dtype.kind == "u" and mask.dtype.itemsize == 8 and mask.size and (
+            int(mask.max()) > np.iinfo(np.int64).max):
+        raise ValueError("mask ids above 2**63 - 1 are not supported (as 64-bit signed "
+                         "integers they read as negative: background)")
     return depth, nocs, mask
 
 
