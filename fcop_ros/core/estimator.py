@@ -253,8 +253,9 @@ _FLAT = 0.25
 
 def _flatness(instances, focal: float, points: int = 200):
     """(O, 2, 2) the square roots of the smallest and the middle over the largest principal
-    variance ([..., 0] and [..., 1]), of each object's NOCS ([:, 0]) and of its pixels
-    back-projected at ``focal`` ([:, 1]; the depth noise taken off their depth variance), from
+    variance ([..., 0] and [..., 1]), of each object's NOCS ([:, 0]; their noise taken off)
+    and of its pixels back-projected at ``focal`` ([:, 1]; the depth noise taken off their
+    depth variance), from
     every step-th pixel, at most ``points`` of them. A similarity keeps these ratios, a wrong
     focal length changes them by a bounded factor; NOCS with a constant or lost channel are
     flatter than the object their depth shows."""
@@ -269,6 +270,8 @@ def _flatness(instances, focal: float, points: int = 200):
         else:
             covs[k] = _moments(x[::step], d[::step], p[::step], focal)
         covs[k, 1, 2, 2] -= _mean(inst.var_d) if len(inst.var_d) else 0.0
+        if inst.var_p is not None and len(inst.var_p):
+            covs[k, 0] -= _mean(inst.var_p) * np.eye(3)
     ev = np.clip(np.linalg.eigvalsh(covs), 0.0, None)  # ascending
     return np.sqrt(ev[..., :2] / np.maximum(ev[..., 2:], 1e-300))
 
@@ -558,7 +561,7 @@ def estimate_focal(
         rng=np.random.default_rng(seed),
     )
     spread = np.array([_nocs_spread(i.p) for i in support])
-    flat = [_flat_reason(r) for r in _flatness(support, f0)]
+    flat = [_flat_reason(r) for r in _flatness(instances, f0)]
     good = (
         fits.ok
         & (fits.quality >= opt.min_fit_quality)
@@ -581,16 +584,18 @@ def estimate_focal(
             )
         elif flat[k] is not None:
             est.rejected[inst.instance_id] = flat[k]
-    flat_ids = [inst.instance_id for inst, why in zip(support, flat)
-                if why is not None and est.rejected.get(inst.instance_id) == why]
-    lost = _constant_channel(support) if flat_ids else None
+    first_flat = next(((inst.instance_id, why) for inst, why in zip(instances, flat)
+                       if why is not None), None)
+    lost = _constant_channel(instances) if first_flat else None
     if lost is not None:
         # A channel constant over every object is a fault of the whole NOCS image: the objects
         # that are not solid in view are as wrong, only less visibly (frames with one channel
         # constant answered 19 of 30 at -34 to -91% before; refusing the flat objects alone
-        # left 5). One object's flat NOCS refuse only that object.
-        est.reason = (f"object {flat_ids[0]}: {est.rejected[flat_ids[0]]} NOCS channel "
-                      f"{lost[0]} is {lost[1]:.3f} on every object: the frame is refused")
+        # left 5). Any object that reads flat raises the question, also one refused for
+        # another reason first (a user's 120 frames: 11 answered when only objects that passed
+        # the other checks could, 2 now). One object's flat NOCS refuse only that object.
+        est.reason = (f"object {first_flat[0]}: {first_flat[1]} NOCS channel {lost[0]} is "
+                      f"{lost[1]:.3f} on every object: the frame is refused")
         return est
     est.mirrored = [
         inst.instance_id for k, inst in enumerate(support) if good[k] and fits.mirrored[k]
