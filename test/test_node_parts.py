@@ -250,6 +250,20 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "no focal estimate yet: no frames",
         ),
         (
+            {"window": WindowEstimate(None, reason="0 frames with focal evidence"),
+             "last_reason": "NOCS channel 2 is 0.500 on every object"},
+            QUIET,
+            DiagnosticStatus.WARN,
+            "no focal estimate yet: 0 frames with focal evidence; the newest frame: NOCS channel",
+        ),
+        (
+            {"last_reason": "NOCS outside [0, 1]"},
+            Rates(5.0, 150, 150, 0, 150, 120),
+            DiagnosticStatus.WARN,
+            "focal 600.0 px from earlier frames: 120 of the 150 frames estimated in the last "
+            "5.0 s gave no focal (the newest: NOCS outside [0, 1])",
+        ),
+        (
             {"window": WindowEstimate(None, reason="no frames"), "warming_up": True},
             QUIET,
             DiagnosticStatus.WARN,

@@ -46,18 +46,21 @@ class DiagnosticsInput:
     kernels: str = ""
     warming_up: bool = False
     focal_range: tuple = (0.0, float("inf"))
+    last_reason: str = ""  # why the newest estimated frame gave no focal ("" if it gave one)
 
 
 @dataclass(frozen=True)
 class Rates:
     """Frames matched, processed and skipped over the last ``span`` seconds, and their rates;
-    ``answered``: depth images given a CameraInfo in that time."""
+    ``answered``: depth images given a CameraInfo in that time; ``refused``: estimated frames
+    that gave no focal (no evidence) in that time."""
 
     span: float
     matched: int
     processed: int
     skipped: int
     answered: int = 0
+    refused: int = 0
 
     @property
     def frame_hz(self) -> float:
@@ -76,19 +79,20 @@ class RateWindow:
         """``start``: when the counts were zero (the node's start): the first reading's rates
         are taken since then, where they would otherwise have no span."""
         self.seconds = seconds
-        self._samples: deque = deque()  # (time, matched, processed, skipped, answered)
+        self._samples: deque = deque()  # (time, matched, processed, skipped, answered, refused)
         self._start = start
 
     def add(self, now: float, matched: int, processed: int, skipped: int,
-            answered: int = 0) -> Rates:
-        self._samples.append((now, matched, processed, skipped, answered))
+            answered: int = 0, refused: int = 0) -> Rates:
+        self._samples.append((now, matched, processed, skipped, answered, refused))
         while len(self._samples) > 1 and now - self._samples[1][0] >= self.seconds:
             self._samples.popleft()
         first = self._samples[0]
         if len(self._samples) == 1 and self._start is not None and self._start < now:
-            first = (self._start, 0, 0, 0, 0)
-        t0, m0, p0, s0, a0 = first
-        return Rates(now - t0, matched - m0, processed - p0, skipped - s0, answered - a0)
+            first = (self._start, 0, 0, 0, 0, 0)
+        t0, m0, p0, s0, a0, r0 = first
+        return Rates(now - t0, matched - m0, processed - p0, skipped - s0, answered - a0,
+                     refused - r0)
 
 
 def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
@@ -96,7 +100,9 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     WARN without a focal (saying so while the kernels are being prepared), with one held back by
     focal_range (changed at run time) or max_uncertainty, when depth images keep coming but no
     complete frame has matched lately (the estimate ages), or when the estimator skipped more
-    frames than it estimated lately; else OK."""
+    frames than it estimated lately, or when most frames estimated lately gave no focal (the
+    focal then comes from earlier frames, which a bad input can leave for a window's length);
+    else OK."""
     win = d.window
     std = getattr(win, "std_rel", None)
     if d.busy_for is not None and d.busy_for > d.max_estimate_age:
@@ -111,6 +117,8 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
                    "on a machine compiles them, up to a minute)")
     elif win.focal is None:
         level, message = WARN, f"no focal estimate yet: {win.reason}"
+        if d.last_reason:
+            message += f"; the newest frame: {d.last_reason}"
     elif not d.focal_range[0] <= win.focal <= d.focal_range[1]:
         level = WARN
         message = (
@@ -130,6 +138,13 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
             f"focal {win.focal:.1f} px from an ageing estimate: {rates.answered} depth images "
             f"in the last {rates.span:.1f} s but no matched depth, NOCS and mask set (is the "
             "NOCS or mask topic silent?)"
+        )
+    elif rates.processed > 0 and 2 * rates.refused > rates.processed:
+        level = WARN
+        message = (
+            f"focal {win.focal:.1f} px from earlier frames: {rates.refused} of the "
+            f"{rates.processed} frames estimated in the last {rates.span:.1f} s gave no focal"
+            + (f" (the newest: {d.last_reason})" if d.last_reason else "")
         )
     elif rates.skipped > rates.processed:
         level = WARN

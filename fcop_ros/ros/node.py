@@ -175,6 +175,13 @@ def _light(est):
     return dataclasses.replace(est, **{k: v for k, v in heavy.items() if k in names})
 
 
+def _newest_reason(est) -> str:
+    """Why the newest estimated frame gave no focal, for diagnostics ("" if it gave one)."""
+    if est is None or est.focal is not None:
+        return ""
+    return est.reason if len(est.reason) <= 300 else est.reason[:297] + "..."
+
+
 class FcopNode(Node):
     """The fcop_node ROS 2 node (see the package README for topics, parameters and the rules)."""
 
@@ -977,9 +984,12 @@ class FcopNode(Node):
                 warnings=dict(self.warnings),
                 kernels=compiled.describe(),
                 warming_up=self._warming_up,
+                last_reason=_newest_reason(self.last_estimate),
             )
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped,
-                                reading.camera_info_published)
+                                reading.camera_info_published,
+                                self.rejected["no_evidence"]
+                                + self.rejected["other_size_no_evidence"])
         return diagnostic_status(
             f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading, rates
         )
