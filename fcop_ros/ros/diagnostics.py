@@ -100,7 +100,8 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     WARN without a focal (saying so while the kernels are being prepared), with one held back by
     focal_range (changed at run time) or max_uncertainty, when depth images keep coming but no
     complete frame has matched lately (the estimate ages), or when the estimator skipped more
-    frames than it estimated lately, or when most frames estimated lately gave no focal (the
+    frames than it estimated lately, or when most frames estimated lately, five or more, gave
+    no focal (the
     focal then comes from earlier frames, which a bad input can leave for a window's length);
     else OK."""
     win = d.window
@@ -139,7 +140,7 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
             f"in the last {rates.span:.1f} s but no matched depth, NOCS and mask set (is the "
             "NOCS or mask topic silent?)"
         )
-    elif rates.processed > 0 and 2 * rates.refused > rates.processed:
+    elif rates.refused >= 5 and 2 * rates.refused > rates.processed:
         level = WARN
         message = (
             f"focal {win.focal:.1f} px from earlier frames: {rates.refused} of the "
