@@ -332,6 +332,15 @@ def _constant_channel(instances, tolerance: float = 0.01):
     return (c, float(np.median(p[:, c]))) if std[c] < tolerance else None
 
 
+def _lost_channel_hint(instances) -> str:
+    """For a frame refused before the objects' fits: a note naming a NOCS channel constant on
+    every object (a dead network output or an image that lost a channel), or ''."""
+    lost = _constant_channel(instances)
+    if lost is None:
+        return ""
+    return (f"; NOCS channel {lost[0]} is {lost[1]:.3f} on every object: a lost channel?")
+
+
 def _flat_reason(ratios) -> str | None:
     """Why an object's NOCS are refused as flatter than its depth shows, or None."""
     nocs, pixels = ratios[:, 0]
@@ -522,7 +531,8 @@ def estimate_focal(
     if votes.size == 0:
         return FocalEstimate(
             None, votes_per_object=per_obj, reason=_no_vote_reason(instances, opt, rng,
-                                                                   drawn_from), **base
+                                                                   drawn_from)
+            + _lost_channel_hint(instances), **base
         )
     if opt.noise_bound.equal_widths:  # one width in log f: one sort of the centres
         st, back = stab_equal_width(np.log(votes), opt.noise_bound.log_half_width), np.exp
@@ -545,7 +555,8 @@ def estimate_focal(
         **base,
     )
     if count < opt.min_frame_votes or ratio < opt.min_inlier_ratio:
-        est.reason = f"too little consensus: {count} agreeing votes ({ratio:.1%}) of {votes.size}"
+        est.reason = (f"too little consensus: {count} agreeing votes ({ratio:.1%}) of "
+                      f"{votes.size}" + _lost_channel_hint(instances))
         return est
     f0 = float(back(st.point))
     est.focal_votes = f0
@@ -604,7 +615,8 @@ def estimate_focal(
     if not good.any():
         why = [f"{i}: {r}" for i, r in est.rejected.items()]
         more = f"; and {len(why) - 8} more (see rejected)" if len(why) > 8 else ""
-        est.reason = "no object whose NOCS explain its shape: " + "; ".join(why[:8]) + more
+        est.reason = ("no object whose NOCS explain its shape: " + "; ".join(why[:8]) + more
+                      + _lost_channel_hint(instances))
         return est
     # Errors that repeat in every frame show in no residual: their share of each object's
     # variance follows from the fit's lean on depth and on the NOCS (.error_model).
