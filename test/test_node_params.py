@@ -64,6 +64,29 @@ def test_unreadable_params_file_at_start_up_is_one_line_and_exit_2(tmp_path):
     assert missing in lines[0] and "params file" in lines[0], lines[0]
 
 
+@pytest.mark.parametrize("text", ["- just\n- a list\n", "fcop_node:\n  focal_min: 300.0\n"])
+def test_params_file_that_names_no_parameters_is_one_line_and_exit_2(tmp_path, text):
+    """YAML that is no params file (a list; a node without ``ros__parameters``): rcl logged a
+    line of its own before the node's."""
+    exe = os.path.join(BIN, "fcop_node")
+    path = tmp_path / "params.yaml"
+    path.write_text(text)
+    res = subprocess.run([exe, "--ros-args", "--params-file", str(path)], capture_output=True,
+                         text=True, timeout=60)
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert res.returncode == 2, res.stderr
+    assert "Traceback" not in res.stderr and len(lines) == 1, res.stderr
+    assert "names no parameters" in lines[0] and "ros__parameters" in lines[0], lines[0]
+
+
+def test_help_prints_usage_and_does_not_start_the_node():
+    exe = os.path.join(BIN, "fcop_node")
+    res = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.startswith("usage: fcop_node") and "exit codes" in res.stdout
+    assert "ready" not in res.stdout + res.stderr
+
+
 @pytest.mark.parametrize("overrides, expected", [
     ({"focal_min": 30000.0},
      "parameter focal_min=30000.0 is not allowed: it must be below focal_max=20000.0"),

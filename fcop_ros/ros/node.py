@@ -1020,9 +1020,46 @@ def _sec(stamp) -> str:
     return "none" if stamp is None else f"{stamp / 1e9:.3f} s"
 
 
+USAGE = """usage: fcop_node [-h] [--ros-args [-r FROM:=TO] [-p NAME:=VALUE]
+                 [--params-file FILE] ...]
+
+Estimates the camera's focal length from depth, NOCS and instance-mask images (topics depth,
+nocs, mask; relative, remappable) and publishes CameraInfo, object poses, markers and
+/diagnostics. Parameters, their defaults and ranges: config/fcop.yaml (installed as
+share/fcop_ros/config/fcop.yaml) and the README's parameter table; at run time
+`ros2 param describe <node> <name>`.
+
+exit codes: 0 after a clean shutdown (Ctrl-C, SIGTERM); 2 for a parameter or params file it
+cannot run with (one line on stderr)."""
+
+
+def wants_help(args) -> bool:
+    """Whether ``-h`` or ``--help`` stands among the arguments outside ``--ros-args`` (rclpy
+    ignores them; the node would start)."""
+    in_ros = False
+    for arg in args[1:]:
+        if arg == "--ros-args":
+            in_ros = True
+        elif arg == "--":
+            in_ros = False
+        elif not in_ros and arg in ("-h", "--help"):
+            return True
+    return False
+
+
+def _names_parameters(doc) -> bool:
+    """Whether a params file's YAML names parameters as rcl reads them: mappings of node names
+    (under namespaces, or ``/**``) down to a ``ros__parameters`` mapping."""
+    if not isinstance(doc, dict):
+        return False
+    return any(key == "ros__parameters" and isinstance(value, dict)
+               or key != "ros__parameters" and _names_parameters(value)
+               for key, value in doc.items())
+
+
 def params_file_problem(args) -> str:
     """What is wrong with a ``--params-file`` among the ROS arguments ('' if nothing): a file
-    that cannot be read or is not YAML."""
+    that cannot be read, is not YAML, or names no ``ros__parameters``."""
     in_ros = False
     for i, arg in enumerate(args):
         if arg == "--ros-args":
@@ -1033,20 +1070,28 @@ def params_file_problem(args) -> str:
             path = args[i + 1]
             try:
                 with open(path, encoding="utf-8") as f:
-                    yaml.safe_load(f)
+                    doc = yaml.safe_load(f)
             except OSError as exc:
                 return f"cannot read params file {path}: {exc.strerror or exc}"
             except yaml.YAMLError as exc:
                 return f"params file {path} is not YAML: {' '.join(str(exc).split())}"
+            if not _names_parameters(doc):
+                return (f"params file {path} names no parameters: it wants "
+                        "'<node name or /**>: ros__parameters: {name: value}' "
+                        "(see config/fcop.yaml)")
     return ""
 
 
 def main(args=None) -> int:
     """Entry point of ``ros2 run fcop_ros fcop_node``: spin until Ctrl-C or external shutdown.
-    Exit codes: 0 after a clean shutdown, 2 for a parameter it cannot run with (one line on
-    stderr)."""
+    Exit codes: 0 after a clean shutdown (and for ``--help``), 2 for a parameter it cannot run
+    with (one line on stderr)."""
+    argv = sys.argv if args is None else args
+    if wants_help(argv):
+        print(USAGE)
+        return 0
     limit_allocator_arenas()  # before the node's threads: no step growth over long runs
-    problem = params_file_problem(sys.argv if args is None else args)
+    problem = params_file_problem(argv)
     if problem:  # before rcl, which logs a line of its own and raises
         print(f"fcop_node: {problem}", file=sys.stderr)
         return 2
