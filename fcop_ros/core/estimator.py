@@ -58,11 +58,12 @@ class FocalEstimate:
     instances beyond ``max_instances`` (the smallest), not used; objects: poses of the combined,
     unmirrored objects when ``estimate_focal`` ran the pose stage (see :mod:`.pose`); votes: all
     valid triplet votes (px);
-    instances: the :class:`~.correspondences.Instance` s of the objects that made the estimate,
-    the input of the pose stage: ``estimate_poses(est.instances, focal, exclude=est.mirrored)``
-    at any focal length, e.g. a window's. object_extents: {instance_id: RMS image radius x
-    median depth (px m)} of the objects that made the estimate, except those the image's edge
-    cuts: the focal length times the object's size, whatever its NOCS say. A zoom scales it;
+    instances: the :class:`~.correspondences.Instance` s of the combined objects whose own
+    std_rel is within ``pose_max_std`` (those that can be posed), the input of the pose stage:
+    ``estimate_poses(est.instances, focal, exclude=est.mirrored)`` at any focal length, e.g. a
+    window's. object_extents: {instance_id: RMS image radius x median depth (px m)} of all the
+    combined objects, except those the image's edge cuts: the focal length times the object's
+    size, whatever its NOCS say. A zoom scales it;
     moving the camera or the object does not (the depth makes up for the image size), so the
     window tells a zoom from frames whose errors moved by it. object_radii: the same objects'
     RMS image radius alone (px), which a depth network's frame-to-frame change of scale does
@@ -478,7 +479,8 @@ def estimate_focal(
             False leaves it to the caller, e.g. at a window's focal length.
 
     Returns a :class:`FocalEstimate`; ``focal`` is None when there is no evidence, never a
-    made-up number. Mismatched or malformed images raise ValueError.
+    made-up number. Mismatched or malformed images, and a principal point off the image,
+    raise ValueError; options not passed as ``options=EstimatorOptions(...)`` raise TypeError.
     """
     opt = _DEFAULT_OPTIONS if options is None else options
     if not isinstance(opt, EstimatorOptions) or isinstance(principal_point, EstimatorOptions):

@@ -80,7 +80,9 @@ class EstimatorOptions:
     worth ``object_tau_weight`` objects. No pose for an object whose own std_rel exceeds
     ``pose_max_std``.
 
-    ``method``: "stabbing" (the paper's fCOP-IS) or "ransac" (fCOP-RANSAC, ``ransac_hypotheses``
+    ``method``: "stabbing" (triplet votes and interval stabbing, as the paper's fCOP-IS, then
+    the refinement above unless ``refine=False``; ``PAPER_FCOP_IS`` is the paper's method taken
+    literally) or "ransac" (fCOP-RANSAC, ``ransac_hypotheses``
     hypotheses, inlier threshold ``ransac_threshold`` relative to each object's median depth;
     the paper's is in metres, the same at 1 m).
     """
