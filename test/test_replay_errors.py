@@ -69,6 +69,8 @@ def read_only_dir(path: Path):
     ("sync_mode:=fuzzy", "parameter sync_mode='fuzzy' from -p must be one of: exact, approximate"),
     ("publish_poses:=maybe", "parameter publish_poses from -p must be bool, got 'maybe'"),
     ("window_frames=3", "-p expects NAME:=VALUE, got 'window_frames=3'"),
+    # What a descriptor cannot say: before, this replay ran until 'fcop_node did not start'.
+    ("camera_name:=a b", "parameter camera_name='a b' is not allowed"),
 ])
 def test_invalid_parameter_value_is_refused(bag, tmp_path, capsys, override, expected):
     assert rp.main(args(bag, tmp_path / "o", "-p", override)) == 2

@@ -127,7 +127,8 @@ def parse_overrides(overrides) -> dict:
 def check_parameters(values: dict, where: dict) -> dict:
     """Check names, types, ranges and choices against fcop_node's declared parameters; return the
     values with integers given for double parameters made doubles. ``where`` names the source."""
-    from ..ros.params import PARAMETERS, check_combination, defaults
+    from ..ros.params import (PARAMETERS, ParameterError, check_combination, check_value,
+                              defaults)
 
     known = sorted(PARAMETERS)
     out = {}
@@ -158,6 +159,10 @@ def check_parameters(values: dict, where: dict) -> dict:
             raise ReplayError(
                 f"parameter {name}={value!r} from {src} must be one of: {', '.join(spec.choices)}"
             )
+        try:  # what a descriptor cannot say, e.g. camera_name's characters
+            check_value(name, value)
+        except ParameterError as exc:
+            raise ReplayError(f"{exc} (from {src})") from None
         out[name] = value
 
     full = defaults()
