@@ -113,6 +113,23 @@ def test_valid_qos_overrides_are_applied(harness):
     assert h.node.pub_info.qos_profile.depth == 3 and h.node._subs[1].qos_profile.depth == 2
 
 
+def test_a_qos_override_changes_its_own_topic_only(harness):
+    """rclpy writes an override into the profile it is handed: a shared profile carried one
+    topic's override to every topic created after it (a hostile user's trial: a reliable
+    /mask made camera_info_in reliable too, a best-effort camera_info the poses and markers),
+    and into rclpy's own qos_profile_sensor_data for every later node of the process."""
+    from rclpy.qos import ReliabilityPolicy, qos_profile_sensor_data
+    h = harness(node_args=[
+        "--ros-args", "-p", "qos_overrides./depth.subscription.depth:=2",
+        "-p", "qos_overrides./camera_info.publisher.reliability:=best_effort"])
+    assert [s.qos_profile.depth for s in h.node._subs] == [2, 5, 5]
+    assert h.node.sub_info_in.qos_profile.depth == 5
+    assert h.node.pub_info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+    assert h.node.pub_poses.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+    assert h.node.pub_markers.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+    assert qos_profile_sensor_data.depth == 5
+
+
 def test_bad_qos_override_in_process_raises_parameter_error():
     from fcop_ros.ros.node import FcopNode
     from fcop_ros.ros.params import ParameterError

@@ -11,6 +11,7 @@ publishing never waits for the estimator, and the estimator never works on a bac
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import difflib
 import os
@@ -295,13 +296,15 @@ class FcopNode(Node):
                     )
 
     def _create_topics_unchecked(self) -> None:
+        # rclpy writes a topic's QoS overrides into the profile it is handed: each topic gets a
+        # copy of its own, or one override would carry over to every topic created after it.
         qos_in = QoSOverridingOptions.with_default_policies()
         self._subs = [
             self.create_subscription(
                 Image,
                 name,
                 lambda msg, i=i: self._on_image(i, msg),
-                qos_profile_sensor_data,
+                copy.copy(qos_profile_sensor_data),
                 qos_overriding_options=qos_in,
             )
             for i, name in enumerate(INPUTS)
@@ -310,26 +313,18 @@ class FcopNode(Node):
             CameraInfo,
             "camera_info_in",
             self._on_camera_info_in,
-            qos_profile_sensor_data,
+            copy.copy(qos_profile_sensor_data),
             qos_overriding_options=qos_in,
         )
         qos_out = QoSOverridingOptions.with_default_policies()
-        # Reliable, volatile, keep last 10, spelled out: the "system default" profile leaves the
-        # durability to the RMW, and Fast DDS then makes the writer transient local.
-        out = QoSProfile(
-            depth=10,
-            history=HistoryPolicy.KEEP_LAST,
-            reliability=ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.VOLATILE,
-        )
         self.pub_info = self.create_publisher(
-            CameraInfo, "camera_info", out, qos_overriding_options=qos_out
+            CameraInfo, "camera_info", _output_qos(), qos_overriding_options=qos_out
         )
         self.pub_poses = self.create_publisher(
-            PoseArray, "object_poses", out, qos_overriding_options=qos_out
+            PoseArray, "object_poses", _output_qos(), qos_overriding_options=qos_out
         )
         self.pub_markers = self.create_publisher(
-            MarkerArray, "object_markers", out, qos_overriding_options=qos_out
+            MarkerArray, "object_markers", _output_qos(), qos_overriding_options=qos_out
         )
         self.pub_latest = self._latched_publisher()
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -1005,6 +1000,18 @@ class FcopNode(Node):
         if self.worker is not None:
             self.worker.stop(timeout=5.0)
         return super().destroy_node()
+
+
+def _output_qos() -> QoSProfile:
+    """A new profile of the outputs: reliable, volatile, keep last 10, spelled out (the "system
+    default" profile leaves the durability to the RMW, and Fast DDS then makes the writer
+    transient local)."""
+    return QoSProfile(
+        depth=10,
+        history=HistoryPolicy.KEEP_LAST,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.VOLATILE,
+    )
 
 
 def to_fcop_convention(nocs: np.ndarray) -> np.ndarray:
