@@ -559,6 +559,29 @@ def test_a_stray_frame_of_another_size_without_evidence_keeps_the_window(harness
     assert "image size changed" not in err and "16x16 frame without focal evidence" in err
 
 
+def test_frames_refused_for_their_encoding_warn_and_name_the_newest(harness):
+    """A hostile user's trial: NOCS sent as 32FC1 after a good start gave 41 of 41 frames
+    rejected while /diagnostics stayed OK and CameraInfo came from the old window; the newest
+    frame's reason shown was an earlier frame's, and stayed after ~/reset."""
+    h = harness()
+    for k in range(3):
+        assert h.frame(frame_messages(clean_frame(1), T0 + k * DT))
+    st = h.node.diagnostic_status()
+    assert st.level == DiagnosticStatus.OK, st.message
+    for k in range(3, 9):
+        d, n, m = frame_messages(clean_frame(1), T0 + k * DT)
+        flat = Image(header=n.header, height=n.height, width=n.width, encoding="32FC1",
+                     step=n.width * 4, data=bytes(n.width * n.height * 4))
+        assert h.frame((d, flat, m))
+    assert h.node.rejected["bad_encoding"] == 6
+    st = h.node.diagnostic_status()
+    assert st.level == DiagnosticStatus.WARN, st.message
+    assert "6 of the " in st.message and "(the newest: rejected: " in st.message
+    assert "32FC1" in st.message
+    h.node._on_reset(Trigger.Request(), Trigger.Response())
+    assert "newest" not in h.node.diagnostic_status().message
+
+
 def test_depth_without_nocs_ages_the_estimate_and_diagnostics_say_so(harness):
     """A reviewer stopped the NOCS topic: CameraInfo went on with the old estimate and
     /diagnostics stayed OK. Depth images answered while no complete frame matches now WARN."""

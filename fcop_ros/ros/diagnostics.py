@@ -46,14 +46,16 @@ class DiagnosticsInput:
     kernels: str = ""
     warming_up: bool = False
     focal_range: tuple = (0.0, float("inf"))
-    last_reason: str = ""  # why the newest estimated frame gave no focal ("" if it gave one)
+    # Why the newest frame the estimator took gave no focal: its input refused ("rejected: ...")
+    # or no evidence in it; "" if it gave one.
+    last_reason: str = ""
 
 
 @dataclass(frozen=True)
 class Rates:
     """Frames matched, processed and skipped over the last ``span`` seconds, and their rates;
-    ``answered``: depth images given a CameraInfo in that time; ``refused``: estimated frames
-    that gave no focal (no evidence) in that time."""
+    ``answered``: depth images given a CameraInfo in that time; ``refused``: frames the
+    estimator took that gave no focal in that time (input it refused, or no evidence)."""
 
     span: float
     matched: int

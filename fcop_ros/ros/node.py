@@ -176,11 +176,9 @@ def _light(est):
     return dataclasses.replace(est, **{k: v for k, v in heavy.items() if k in names})
 
 
-def _newest_reason(est) -> str:
-    """Why the newest estimated frame gave no focal, for diagnostics ("" if it gave one)."""
-    if est is None or est.focal is not None:
-        return ""
-    return est.reason if len(est.reason) <= 300 else est.reason[:297] + "..."
+def _clipped(reason: str) -> str:
+    """A reason for diagnostics: at most 300 characters."""
+    return reason if len(reason) <= 300 else reason[:297] + "..."
 
 
 class FcopNode(Node):
@@ -208,6 +206,10 @@ class FcopNode(Node):
         # Matched frames replaced in the hand-off before the estimator took them.
         self.handoff_dropped = 0
         self.last_estimate = None  # the FocalEstimate of the newest processed frame
+        # Why the newest frame the estimator took gave no focal ("" if it gave one), and how
+        # many frames it took gave none, input it refused included: for diagnostics.
+        self._newest_refusal = ""
+        self._no_focal_frames = 0
         self._proc_times: deque = deque(maxlen=200)
         # Frame and estimator rates over 5 s, for diagnostics (the first reading: since start).
         self._rates = RateWindow(5.0, start=self._now())
@@ -471,6 +473,7 @@ class FcopNode(Node):
         self.window.reset()
         self._history.clear()
         self._estimate = None
+        self._newest_refusal = ""
         self.worker.clear()
 
     # ----- intrinsics other than f: parameters, camera_info_in, image centre
@@ -701,6 +704,16 @@ class FcopNode(Node):
         with self._lock:
             self.rejected[reason] += n
 
+    def _refuse_frame(self, reason: str, why: str) -> bool:
+        """Count a frame the estimator took but could not use (``reason``), log ``why`` with a
+        throttle, and keep it as the newest frame's reason; returns False."""
+        with self._lock:
+            self.rejected[reason] += 1
+            self._no_focal_frames += 1
+            self._newest_refusal = _clipped(f"rejected: {why}")
+        self._throttle.warn(reason, f"fcop_node: rejected frame: {why}")
+        return False
+
     def idle(self) -> bool:
         """True when no frame is waiting or being estimated (used by replay and tests)."""
         return self.worker.idle()
@@ -753,25 +766,17 @@ class FcopNode(Node):
             nocs = nocs_from_image(nocs_msg)
             mask = mask_from_image(mask_msg)
         except ImageFormatError as exc:
-            self._reject("bad_encoding")
-            self._throttle.warn("bad_encoding", f"fcop_node: rejected frame: {exc}")
-            return False
+            return self._refuse_frame("bad_encoding", str(exc))
         if not (depth.shape == nocs.shape[:2] == mask.shape):
-            self._reject("size_mismatch")
-            self._throttle.warn(
-                "size_mismatch",
-                f"fcop_node: rejected frame: image sizes differ: depth "
-                f"{depth.shape[::-1]}, nocs {nocs.shape[1::-1]}, mask {mask.shape[::-1]}",
-            )
-            return False
+            return self._refuse_frame(
+                "size_mismatch", f"image sizes differ: depth {depth.shape[::-1]}, nocs "
+                f"{nocs.shape[1::-1]}, mask {mask.shape[::-1]}")
         h, w = depth.shape
         try:
             with self._lock:
                 cx, cy, _, _, _ = self._intrinsics(w, h)
         except _Reject as exc:
-            self._reject(exc.reason)
-            self._throttle.warn(exc.reason, f"fcop_node: rejected frame: {exc}")
-            return False
+            return self._refuse_frame(exc.reason, str(exc))
         if p["nocs_convention"] == "nocs_dataset":
             nocs = to_fcop_convention(nocs)
         est = estimate_focal(
@@ -811,6 +816,8 @@ class FcopNode(Node):
                 self._update_estimate_locked(win)
                 ready = self._estimate
             self.last_estimate = est
+            self._newest_refusal = "" if est.focal is not None else _clipped(est.reason)
+            self._no_focal_frames += est.focal is None
             self._proc_times.append(time.perf_counter() - t0)
         if stray is not None:
             self._reject("other_size_no_evidence")
@@ -979,12 +986,10 @@ class FcopNode(Node):
                 warnings=dict(self.warnings),
                 kernels=compiled.describe(),
                 warming_up=self._warming_up,
-                last_reason=_newest_reason(self.last_estimate),
+                last_reason=self._newest_refusal,
             )
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped,
-                                reading.camera_info_published,
-                                self.rejected["no_evidence"]
-                                + self.rejected["other_size_no_evidence"])
+                                reading.camera_info_published, self._no_focal_frames)
         return diagnostic_status(
             f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading, rates
         )
