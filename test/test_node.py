@@ -559,6 +559,15 @@ def test_a_stray_frame_of_another_size_without_evidence_keeps_the_window(harness
     assert "image size changed" not in err and "16x16 frame without focal evidence" in err
 
 
+def test_a_frame_stamped_before_1970_gets_its_camera_info(harness):
+    """builtin_interfaces/Time allows a negative sec; a hostile user's frame at sec=-5 was
+    estimated and posed but got no CameraInfo (the stamp compared with a start value of -1)."""
+    h = harness()
+    assert h.frame(frame_messages(clean_frame(1), -5_000_000_000))
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 10)
+    assert stamp_ns(h.info.msgs[0]) == -5_000_000_000
+
+
 def test_frames_refused_for_their_encoding_warn_and_name_the_newest(harness):
     """A hostile user's trial: NOCS sent as 32FC1 after a good start gave 41 of 41 frames
     rejected while /diagnostics stayed OK and CameraInfo came from the old window; the newest

@@ -237,7 +237,7 @@ class FcopNode(Node):
         self._last_objects: list = []
         self._answered: OrderedDict = OrderedDict()  # depth stamps that got their CameraInfo
         self._unanswered: OrderedDict = OrderedDict()  # depth stamps that came before an estimate
-        self._last_info_stamp = -1
+        self._last_info_stamp = float("-inf")  # stamps may be negative
         self._cam_in: CameraInfo | None = None
         self._warned_distortion = False
         self._rng = np.random.default_rng(None if self.p["seed"] < 0 else int(self.p["seed"]))
@@ -628,7 +628,7 @@ class FcopNode(Node):
         last answered one are answered again."""
         self._answered.clear()
         self._unanswered.clear()
-        self._last_info_stamp = -1
+        self._last_info_stamp = float("-inf")
 
     @staticmethod
     def _remember(od: OrderedDict, stamp: int, keep: int = 256) -> None:
