@@ -691,8 +691,9 @@ class FcopNode(Node):
 
     def _on_worker_error(self, item, exc: Exception) -> None:
         """The node must outlive any single bad frame: count it and say which. A frame that
-        outlived destroy_node's wait fails on the destroyed handles: nothing to say then."""
-        if self.worker.stopping:
+        outlived destroy_node's wait fails on the destroyed handles, and one in progress when
+        Ctrl-C shut the context down on its publishers: nothing to say then."""
+        if self.worker.stopping or not self.context.ok():
             return
         self._reject("exception")
         self._throttle.warn(
@@ -1127,6 +1128,11 @@ def main(args=None) -> int:
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RCLError:
+        # Ctrl-C or SIGTERM while the node was being built: rclpy's signal handler shut the
+        # context down under it, and rcl refuses the next entity. A clean stop, not a crash.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()
