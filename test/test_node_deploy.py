@@ -142,6 +142,24 @@ def test_camera_info_in_is_carried_through(harness, capfd):
     assert capfd.readouterr().err.count("camera_info_in has non-zero distortion") == 1
 
 
+def test_camera_info_in_with_nan_is_ignored_and_counted(harness, capfd):
+    """A hostile user's trial: NaN in the driver's D or R came out in /camera_info as they
+    were. Such a message is now a counted drop, and the last good one stays in use."""
+    h = harness()
+    drv = driver_info()
+    pub = send_driver_info(h, drv)
+    for n, field in enumerate(("d", "r"), 1):
+        bad = driver_info()
+        setattr(bad, field, [float("nan")] * len(getattr(bad, field)))
+        pub.publish(bad)
+        assert spin_until(h.ex, lambda: h.node.rejected["camera_info_in_not_finite"] == n, 10)
+    assert h.frame(frame_messages(cam(0), T0))
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 10)
+    out = h.info.msgs[0]
+    assert list(out.d) == list(drv.d) and np.allclose(out.r, drv.r)
+    assert "camera_info_in message: its D hold NaN" in capfd.readouterr().err
+
+
 def test_camera_info_in_of_another_size_rejects_frames(harness):
     h = harness()
     send_driver_info(h, driver_info(1280, 960))

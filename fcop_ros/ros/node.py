@@ -517,6 +517,15 @@ class FcopNode(Node):
         return info
 
     def _on_camera_info_in(self, msg: CameraInfo) -> None:
+        bad = [name for name, values in (("K", msg.k), ("D", msg.d), ("R", msg.r))
+               if not np.all(np.isfinite(np.asarray(values, dtype=np.float64)))]
+        if bad:  # the output would carry them: keep the driver's last good message
+            self._reject("camera_info_in_not_finite")
+            self._throttle.warn(
+                "camera_info_in_not_finite",
+                f"fcop_node: ignored a camera_info_in message: its {', '.join(bad)} hold NaN or "
+                "inf values; the last good one, if any, stays in use")
+            return
         with self._lock:
             self._cam_in = msg
         if any(v != 0 for v in msg.d) and not self._warned_distortion:
