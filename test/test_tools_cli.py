@@ -184,3 +184,14 @@ def test_replay_says_which_options_its_mode_ignores(tmp_path, capsys):
     assert "fcop_replay: --out, -p apply only without --play: ignored" in err
     assert rp.main([str(tmp_path / "none")] + topics) == 2
     assert "ignored" not in capsys.readouterr().err
+
+
+def test_demo_interrupted_says_so_without_a_traceback(tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the demo writes its bag: a line and 130, as fcop_replay (a docs audit saw a
+    traceback)."""
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(demo, "make_bag", interrupted)
+    assert demo.main(["--out", str(tmp_path / "demo"), "--frames", "3"]) == 130
+    assert capsys.readouterr().err == "fcop_demo: interrupted\n"

@@ -74,6 +74,9 @@ def main(argv=None) -> int:
     except (BagError, OSError, ReplayError) as exc:
         print(f"fcop_demo: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # as fcop_replay: no traceback, the shell's code for Ctrl-C
+        print("fcop_demo: interrupted", file=sys.stderr)
+        return 130
     print(summary.text())
     print(f"report image: {out / 'report.png'}")
     return 0 if summary.frames_estimated else 1
