@@ -31,8 +31,9 @@ def test_every_option_has_help_and_shows_its_default(prog):
         assert action.help and len(action.help) > 8, (prog, action.dest)
         helptext = parser.formatter_class(prog)._get_help_string(action)
         flag = isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction))
-        if flag:  # '--no-clock (default: True)' read as 'no clock by default'
-            assert "(default:" not in helptext, (prog, action.dest)
+        empty = isinstance(action.default, (list, tuple)) and not action.default
+        if flag or empty:  # '--no-clock (default: True)' read as 'no clock by default'
+            assert "(default:" not in helptext, (prog, action.dest)  # '-p ... (default: [])'
         elif action.default is not None and not action.required:
             assert "(default: %(default)s)" in helptext, (prog, action.dest)
     assert "exit codes:" in text

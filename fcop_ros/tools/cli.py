@@ -11,6 +11,7 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescript
 
     def _get_help_string(self, action):
         flag = isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction))
-        if action.default is None or action.required or flag:
+        empty = isinstance(action.default, (list, tuple)) and not action.default  # -p ...
+        if action.default is None or action.required or flag or empty:
             return action.help
         return super()._get_help_string(action)
