@@ -509,6 +509,9 @@ def test_diagnostics_error_when_the_estimator_stalls_and_warn_when_behind(
     h = harness(parameter_overrides=[Parameter("diagnostics_period", value=0.1),
                                      Parameter("max_estimate_age", value=0.3)])
     rec = Recorder(h.tester, DiagnosticArray, "/diagnostics")
+    # The rates look back 5 s; on a loaded machine (CI beside another job) the skips below
+    # slid out of that span before the last check. The rule, not the wall clock, is tested.
+    h.node._rates.seconds = 120.0
     try:
         assert h.frame(frame_messages(cam(0), T0))
         gate.close()
