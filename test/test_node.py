@@ -605,6 +605,7 @@ def test_frames_refused_for_their_encoding_warn_and_name_the_newest(harness):
     rejected while /diagnostics stayed OK and CameraInfo came from the old window; the newest
     frame's reason shown was an earlier frame's, and stayed after ~/reset."""
     h = harness()
+    h.node._rates.seconds = 120.0  # all nine frames within the rates' span, however slow
     for k in range(3):
         assert h.frame(frame_messages(clean_frame(1), T0 + k * DT))
     st = h.node.diagnostic_status()
