@@ -71,6 +71,10 @@ def read_only_dir(path: Path):
     ("window_frames=3", "-p expects NAME:=VALUE, got 'window_frames=3'"),
     # What a descriptor cannot say: before, this replay ran until 'fcop_node did not start'.
     ("camera_name:=a b", "parameter camera_name='a b' is not allowed"),
+    # The node's own refusal came after --out was cleared (a hostile user's earlier outputs).
+    ("qos_overrides./camera/depth.subscription.depth:=-1",
+     "parameter qos_overrides./camera/depth.subscription.depth=-1 from -p is not allowed"),
+    ("use_sim_time:=banana", "parameter use_sim_time='banana' from -p is not allowed"),
 ])
 def test_invalid_parameter_value_is_refused(bag, tmp_path, capsys, override, expected):
     assert rp.main(args(bag, tmp_path / "o", "-p", override)) == 2
@@ -239,3 +243,32 @@ def test_the_shipped_config_applies_to_the_replayed_node():
     for name, spec in PARAMETERS.items():
         assert params[name] == spec.default, name
     assert replay_params.load_params_file(config_path()) == params
+
+
+def test_a_bag_where_the_output_bag_goes_is_refused_not_deleted(bag, tmp_path, capsys):
+    """A hostile user replayed a bag named fcop_output inside --out: the replay cleared it as a
+    previous output and wrote its own in its place."""
+    import shutil
+    inside = tmp_path / "o" / "fcop_output"
+    shutil.copytree(bag, inside)
+    files = sorted(p.name for p in inside.iterdir())
+    assert rp.main(args(inside, tmp_path / "o")) == 2
+    assert "where the output bag goes" in one_line(capsys.readouterr().err)
+    assert sorted(p.name for p in inside.iterdir()) == files
+
+
+def test_truth_without_a_focal_length_leaves_the_truth_columns_empty(tmp_path):
+    """An uncalibrated driver publishes K all zero: the replay stopped at its first estimate
+    as a 'damaged bag' (a division by zero) and lost the rest."""
+    from fcop_ros.tools.estimates_csv import EstimatesCsv
+    from fcop_ros.tools.replay_base import ReplaySummary
+    summary = ReplaySummary()
+    table = EstimatesCsv(tmp_path / "e.csv", True, summary)
+    for k, truth in enumerate((0.0, float("nan"), 600.0)):
+        table.truth(k, truth)
+        table.add({"stamp_ns": k, "focal": 601.0, "cx": 1.0, "cy": 1.0, "support": 5,
+                   "std_rel": 0.01, "objects": 2})
+    table.close()
+    rows = (tmp_path / "e.csv").read_text().splitlines()
+    assert [r.split(",")[-2:] for r in rows[1:]] == [["", ""], ["", ""], ["600.0000", "0.1667"]]
+    assert summary.errors_pct == [pytest.approx(0.1666667)]

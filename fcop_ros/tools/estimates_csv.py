@@ -4,6 +4,7 @@ each joined with the truth of its stamp when the bag has a truth topic."""
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 from .replay_base import ReplaySummary, writing
@@ -54,8 +55,8 @@ class EstimatesCsv:
         import bisect
 
         i = bisect.bisect_right(self.truth_stamps, row["stamp_ns"]) - 1
-        if i < 0:
-            return
+        if i < 0 or not 0 < self.truth_values[i] < math.inf:
+            return  # an uncalibrated driver's all-zero K is no truth: the row goes without
         row["focal_true"] = float(self.truth_values[i])
         row["focal_error_pct"] = 100.0 * (row["focal"] / row["focal_true"] - 1.0)
         self.summary.errors_pct.append(abs(row["focal_error_pct"]))

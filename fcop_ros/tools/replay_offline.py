@@ -44,6 +44,17 @@ def _node_args(inputs: dict) -> list[str]:
     return args
 
 
+def _not_the_input(bag, out_dir) -> None:
+    """ReplayError when the input bag lies in the output bag's place, which --out clears."""
+    out_bag = (Path(out_dir) / "fcop_output").resolve()
+    src = Path(bag).resolve()
+    if src == out_bag or out_bag in src.parents:
+        raise ReplayError(
+            f"the bag {bag} is where the output bag goes ({out_bag}), which a replay clears: "
+            "choose another --out"
+        )
+
+
 def _prepare_out(out_dir) -> Path:
     """Create --out (a directory) and clear a previous output bag; OutputError if impossible."""
     out = Path(out_dir)
@@ -109,6 +120,7 @@ def replay(
         total = source.counts.get(depth_topic, 0)
         if total == 0:
             raise ReplayError(f"depth topic {depth_topic!r} has no messages")
+        _not_the_input(bag, out_dir)
         out = _prepare_out(out_dir)
         summary.out_dir = str(out)
         table = EstimatesCsv(out / "estimates.csv", truth_topic is not None, summary)

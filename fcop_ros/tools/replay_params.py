@@ -127,6 +127,7 @@ def parse_overrides(overrides) -> dict:
 def check_parameters(values: dict, where: dict) -> dict:
     """Check names, types, ranges and choices against fcop_node's declared parameters; return the
     values with integers given for double parameters made doubles. ``where`` names the source."""
+    from ..ros.node import qos_override_problem
     from ..ros.params import (PARAMETERS, ParameterError, check_combination, check_value,
                               defaults)
 
@@ -135,6 +136,15 @@ def check_parameters(values: dict, where: dict) -> dict:
     for name, value in values.items():
         src = where.get(name, "")
         if name in _ROS_PARAMETERS or name.startswith("qos_overrides."):
+            # Checked here as the node would, before --out is touched (its refusal at start-up
+            # came after the previous outputs were cleared).
+            if name.startswith("qos_overrides."):
+                problem = qos_override_problem(name.rsplit(".", 1)[-1], value)
+            else:
+                problem = "" if isinstance(value, bool) else "true or false"
+            if problem:
+                raise ReplayError(f"parameter {name}={value!r} from {src} is not allowed: "
+                                  f"{problem}")
             out[name] = value
             continue
         if name not in PARAMETERS:
