@@ -132,3 +132,54 @@ def test_cli_unwritable_csv_is_one_line_and_exit_2(dataset, tmp_path, capsys):
                     str(tmp_path / "file" / "eval.csv")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("fcop_eval_nocs: ") and "Not a directory" in err and "\n" not in err
+
+
+@pytest.mark.parametrize("intrinsics", ["0,0,159.5,119.5", "nan,nan,159.5,119.5",
+                                        "600,600,inf,119.5"])
+def test_intrinsics_without_a_usable_focal_are_refused(dataset, intrinsics, capsys):
+    """A hostile user: '0,0,...' was a ZeroDivisionError traceback, 'nan,...' printed nan
+    medians with exit 0."""
+    root, _ = dataset
+    assert ne.main([str(root), "--intrinsics", intrinsics]) == 2
+    assert capsys.readouterr().err.startswith("fcop_eval_nocs: intrinsics fx,fy,cx,cy must be")
+
+
+def test_an_unreadable_frame_is_a_row_and_the_others_are_estimated(dataset, tmp_path):
+    """One frame's missing depth ended the whole run with no CSV (a hostile user's trial)."""
+    import shutil
+    root, _ = dataset
+    copy = tmp_path / "data"
+    shutil.copytree(root, copy)
+    victim = sorted(copy.rglob("*_depth.png"))[1]
+    victim.unlink()
+    out = tmp_path / "eval.csv"
+    assert ne.main([str(copy), "--intrinsics", "real275", "--csv", str(out)]) == 0
+    rows = list(csv.DictReader(open(out)))
+    skipped = [r for r in rows if r["reason"].startswith("frame skipped: ")]
+    assert len(rows) == 6 and len(skipped) == 1 and str(victim) in skipped[0]["reason"]
+    assert all(r["focal"] for r in rows if r not in skipped)
+
+
+def test_an_unwritable_csv_fails_before_the_first_frame(dataset, tmp_path, capsys, monkeypatch):
+    root, _ = dataset
+    monkeypatch.setattr(ne, "load_frame", lambda *a: pytest.fail("a frame was read"))
+    (tmp_path / "csvdir").mkdir()
+    assert ne.main([str(root), "--intrinsics", "real275", "--csv", str(tmp_path / "csvdir")]) == 2
+    assert "Is a directory" in capsys.readouterr().err
+
+
+def test_interrupted_keeps_the_rows_before_and_exits_130(dataset, tmp_path, capsys, monkeypatch):
+    root, _ = dataset
+    real, calls = ne.load_frame, []
+
+    def load(*args):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*args)
+
+    monkeypatch.setattr(ne, "load_frame", load)
+    out = tmp_path / "eval.csv"
+    assert ne.main([str(root), "--intrinsics", "real275", "--csv", str(out)]) == 130
+    assert len(list(csv.DictReader(open(out)))) == 2
+    assert "interrupted" in capsys.readouterr().err

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import math
 import sys
 import time
 from pathlib import Path
@@ -37,6 +38,10 @@ def parse_intrinsics(text: str):
     except ValueError:
         raise ValueError(
             f"intrinsics must be real275, camera25 or fx,fy,cx,cy; got {text!r}") from None
+    if not (0 < fx < math.inf and 0 < fy < math.inf and math.isfinite(cx)
+            and math.isfinite(cy)):
+        raise ValueError(f"intrinsics fx,fy,cx,cy must be finite, the focal lengths positive; "
+                         f"got {text!r}")
     return fx, fy, cx, cy
 
 
@@ -148,31 +153,49 @@ def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None,
     fx, fy, cx, cy = intrinsics
     f_true = 0.5 * (fx + fy)
     rows = []
-    for n, prefix in enumerate(frames):
-        depth, nocs, mask = load_frame(prefix, root, depth_dir, nocs_dir)
-        pp = (cx, cy) if use_principal_point else None
-        est = estimate_focal(depth, nocs, mask, pp, options=options, seed=n)
-        rel = prefix.relative_to(root)
-        scene = str(rel.parent) if str(rel.parent) != "." else root.name
-        err = None if est.focal is None else 100.0 * (est.focal / f_true - 1.0)
-        rows.append({"scene": scene, "frame": rel.name, "focal_true": f_true,
-                     "focal": "" if est.focal is None else round(est.focal, 4),
-                     "error_pct": "" if err is None else round(err, 4),
-                     "objects": len(est.objects),
-                     "inlier_ratio": round(est.inlier_ratio, 4), "reason": est.reason})
-        if progress:
-            progress(n + 1, len(frames))
-    if out_csv is not None:
-        with open(out_csv, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
+    # Opened first and written row by row: a --csv that cannot be written fails before hours of
+    # estimation, and an interrupted run keeps the frames before.
+    fh = None if out_csv is None else open(out_csv, "w", newline="")
+    try:
+        writer = None if fh is None else csv.DictWriter(fh, fieldnames=CSV_FIELDS)
+        if writer is not None:
+            writer.writeheader()
+        for n, prefix in enumerate(frames):
+            rel = prefix.relative_to(root)
+            scene = str(rel.parent) if str(rel.parent) != "." else root.name
+            row = {"scene": scene, "frame": rel.name, "focal_true": f_true, "focal": "",
+                   "error_pct": "", "objects": 0, "inlier_ratio": 0.0}
+            try:  # one unreadable frame of a dataset is a row with its reason, not the end
+                depth, nocs, mask = load_frame(prefix, root, depth_dir, nocs_dir)
+                pp = (cx, cy) if use_principal_point else None
+                est = estimate_focal(depth, nocs, mask, pp, options=options, seed=n)
+            except (OSError, ValueError) as exc:
+                row["reason"] = f"frame skipped: {exc}"
+            else:
+                err = None if est.focal is None else 100.0 * (est.focal / f_true - 1.0)
+                row.update({"focal": "" if est.focal is None else round(est.focal, 4),
+                            "error_pct": "" if err is None else round(err, 4),
+                            "objects": len(est.objects),
+                            "inlier_ratio": round(est.inlier_ratio, 4), "reason": est.reason})
+            rows.append(row)
+            if writer is not None:
+                writer.writerow(row)
+                fh.flush()
+            if progress:
+                progress(n + 1, len(frames))
+    finally:
+        if fh is not None:
+            fh.close()
     scenes = {}
     for r in rows:
         scenes.setdefault(r["scene"], []).append(r)
     summary = {s: _median_abs(rs) for s, rs in sorted(scenes.items())}
     summary["all"] = _median_abs(rows)
     return rows, summary
+
+
+CSV_FIELDS = ["scene", "frame", "focal_true", "focal", "error_pct", "objects", "inlier_ratio",
+              "reason"]
 
 
 def _median_abs(rows):
@@ -185,8 +208,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     ap = argparse.ArgumentParser(prog="fcop_eval_nocs", description=__doc__,
                                  formatter_class=HelpFormatter,
-                                 epilog="exit codes:\n  0   done\n  2   unusable input (missing "
-                                        "directory, no frame, bad --intrinsics)")
+                                 epilog="exit codes:\n  0   done (a frame that cannot be "
+                                        "read is a CSV row with its reason)\n"
+                                        "  2   unusable input (missing "
+                                        "directory, no frame, bad --intrinsics, a --csv that "
+                                        "cannot be written)\n  130 interrupted (the CSV "
+                                        "holds the frames before)")
     ap.add_argument("dir", help="dataset directory (scenes of *_mask.png, *_coord.png, "
                                 "*_depth.png, *_meta.txt)")
     ap.add_argument("--intrinsics", required=True,
@@ -216,6 +243,14 @@ def main(argv=None) -> int:
     except (OSError, ValueError) as exc:
         print(f"fcop_eval_nocs: {exc}", file=sys.stderr)
         return 2
+    except (KeyboardInterrupt, SystemError) as exc:
+        # Ctrl-C inside a compiled kernel comes out as numba's SystemError around it.
+        if not isinstance(exc, KeyboardInterrupt) and not isinstance(exc.__context__,
+                                                                      KeyboardInterrupt):
+            raise
+        print(f"fcop_eval_nocs: interrupted; {args.csv} holds the frames before",
+              file=sys.stderr)
+        return 130
     print(f"{len(rows)} frames in {time.perf_counter() - t0:.1f} s; median |focal error| per "
           f"scene (frames with an estimate / frames):\n")
     print("| scene | median error % | frames |")
