@@ -145,6 +145,9 @@ def test_make_bag_cli_compression_default_and_errors(tmp_path, capsys):
     (["--focal", "nan"], "focal must be a positive number of pixels, got nan"),
     (["--rate", "0"], "--rate must be a positive number of frames per second, got 0.0"),
     (["--rate", "-3"], "--rate must be a positive number of frames per second, got -3.0"),
+    # A hostile user's: every stamp the same, and stamps whose seconds wrap negative.
+    (["--rate", "1e10"], "--rate 1e+10 Hz is above 1e9 Hz"),
+    (["--rate", "1e-9"], "beyond 2038"),
     (["--zoom-frame", "10", "--zoom-focal", "700"], "the zoom frame 10 is not one of the 4"),
     (["--zoom-frame", "2", "--zoom-focal", "-1"], "zoom focal must be a positive number"),
     (["--objects", "0"], "need at least one frame, one object"),
@@ -196,3 +199,19 @@ def test_demo_interrupted_says_so_without_a_traceback(tmp_path, capsys, monkeypa
     monkeypatch.setattr(demo, "make_bag", interrupted)
     assert demo.main(["--out", str(tmp_path / "demo"), "--frames", "3"]) == 130
     assert capsys.readouterr().err == "fcop_demo: interrupted\n"
+
+
+def test_make_bag_and_replay_interrupted_say_so(tmp_path, capsys, monkeypatch):
+    """Ctrl-C: exit 130 and one line, where both said nothing (a hostile user's trial)."""
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(mb, "make_bag", interrupted)
+    assert mb.main([str(tmp_path / "b"), "--frames", "3"]) == 130
+    assert capsys.readouterr().err.startswith("fcop_make_bag: interrupted")
+    monkeypatch.setattr(rp, "replay", interrupted)
+    monkeypatch.setattr(rp, "BagSource", interrupted, raising=False)
+    code = rp.main([str(tmp_path / "b"), "--depth-topic", "/d", "--nocs-topic", "/n",
+                    "--mask-topic", "/m", "--out", str(tmp_path / "o")])
+    assert code == 130, capsys.readouterr().err
+    assert capsys.readouterr().err.startswith("fcop_replay: interrupted")

@@ -28,6 +28,21 @@ TOPICS = dict(depth="/camera/depth", nocs="/camera/nocs", mask="/camera/mask",
 FRAME_ID = "camera_optical_frame"
 
 
+def _stamp_step(rate: float, frames: int, start_ns: int) -> int:
+    """Nanoseconds between frames at ``rate``, or ValueError when the stamps would not be
+    distinct (above 1 GHz) or the last would not fit builtin_interfaces/Time (int32 seconds)."""
+    if not (math.isfinite(rate) and rate > 0):
+        raise ValueError(f"--rate must be a positive number of frames per second, got {rate}")
+    step = int(round(1e9 / rate))
+    if step < 1:
+        raise ValueError(f"--rate {rate:g} Hz is above 1e9 Hz: the frames' nanosecond stamps "
+                         "would repeat")
+    if start_ns + (frames - 1) * step >= 2**31 * 10**9:
+        raise ValueError(f"--rate {rate:g} Hz spreads {frames} frames beyond 2038, where a ROS "
+                         "stamp's int32 seconds end")
+    return step
+
+
 def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0,
              storage: str = "mcap", depth_encoding: str = "32FC1", nocs_encoding: str = "32FC3",
              mask_encoding: str = "mono8", depth_scale: float = 0.001,
@@ -36,9 +51,7 @@ def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0,
     """Write the bag; returns the number of frames. Stamps start at ``start_ns``, 1/rate apart.
     ``progress(frames written)`` is called after every frame."""
 
-    if not rate > 0:
-        raise ValueError("rate must be > 0 Hz")
-    step = int(round(1e9 / rate))
+    step = _stamp_step(rate, spec.frames, start_ns)
     n = 0
     with BagWriter(path, storage, compression) as bag:
         for k, frame in camera_sequence(spec, seed):
@@ -101,13 +114,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    if not (math.isfinite(args.rate) and args.rate > 0):
-        print(f"fcop_make_bag: --rate must be a positive number of frames per second, got "
-              f"{args.rate}", file=sys.stderr)
-        return 2
     try:
         spec = SequenceSpec(args.frames, args.width, args.height, args.focal, args.zoom_frame,
                             args.zoom_focal, args.preset, args.objects)
+        _stamp_step(args.rate, spec.frames, 1_700_000_000_000_000_000)
     except ValueError as exc:
         print(f"fcop_make_bag: {exc}", file=sys.stderr)
         return 2
@@ -125,6 +135,8 @@ def main(argv=None) -> int:
         print(f"fcop_make_bag: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        print(f"fcop_make_bag: interrupted; {args.out} holds the frames written before",
+              file=sys.stderr)
         return 130
     finally:
         if bar is not None:
