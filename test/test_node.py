@@ -624,6 +624,23 @@ def test_frames_refused_for_their_encoding_warn_and_name_the_newest(harness):
     assert "newest" not in h.node.diagnostic_status().message
 
 
+def test_after_a_reset_a_frame_of_another_size_is_no_stray(harness, capfd):
+    """A hostile user's trial: after ~/reset a 16x16 frame without evidence was dropped as a
+    stray 'the window keeps its 640x480 frames', of a window with no frames."""
+    from msg_adapters import depth_to_image, mask_to_image, nocs_to_image
+    h = harness()
+    assert h.frame(frame_messages(clean_frame(1), T0))
+    h.node._on_reset(Trigger.Request(), Trigger.Response())
+    hdr = header_from_ns(T0 + DT, "camera_optical_frame")
+    tiny = (depth_to_image(np.full((16, 16), np.nan, np.float32), "32FC1", hdr),
+            nocs_to_image(np.zeros((16, 16, 3), np.float32), "32FC3", hdr),
+            mask_to_image(np.zeros((16, 16), np.uint8), "mono8", hdr))
+    assert h.frame(tiny)
+    assert h.node.rejected["other_size_no_evidence"] == 0
+    assert h.node.rejected["no_evidence"] == 1
+    assert "keeps its 640x480" not in capfd.readouterr().err
+
+
 def test_depth_without_nocs_ages_the_estimate_and_diagnostics_say_so(harness):
     """A reviewer stopped the NOCS topic: CameraInfo went on with the old estimate and
     /diagnostics stayed OK. Depth images answered while no complete frame matches now WARN."""

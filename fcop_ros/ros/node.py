@@ -813,8 +813,9 @@ class FcopNode(Node):
             if generation is not None and generation != self.worker.generation:
                 return False  # taken before a reset
             if self._size != (w, h):
-                if est.focal is None and self._size is not None:
-                    # Another size without evidence: a drop; only evidence starts a new window.
+                if est.focal is None and self._size is not None and len(self.window):
+                    # Another size without evidence: a drop; only evidence starts a new window
+                    # (an empty one, after ~/reset, takes the new size).
                     stray = self._size
                 else:
                     resized, self._size = self._size, (w, h)
