@@ -1056,18 +1056,24 @@ exit codes: 0 after a clean shutdown (Ctrl-C, SIGTERM); 2 for a parameter or par
 cannot run with (one line on stderr)."""
 
 
-def wants_help(args) -> bool:
-    """Whether ``-h`` or ``--help`` stands among the arguments outside ``--ros-args`` (rclpy
-    ignores them; the node would start)."""
+def _ros_sections(args):
+    """(index, argument, whether it stands inside a ``--ros-args`` ... ``--`` section) of each
+    command-line argument but the section markers."""
     in_ros = False
-    for arg in args[1:]:
+    for i, arg in enumerate(args):
         if arg == "--ros-args":
             in_ros = True
         elif arg == "--":
             in_ros = False
-        elif not in_ros and arg in ("-h", "--help"):
-            return True
-    return False
+        else:
+            yield i, arg, in_ros
+
+
+def wants_help(args) -> bool:
+    """Whether ``-h`` or ``--help`` stands among the arguments outside ``--ros-args`` (rclpy
+    ignores them; the node would start)."""
+    return any(i > 0 and not in_ros and arg in ("-h", "--help")
+               for i, arg, in_ros in _ros_sections(args))
 
 
 def _names_parameters(doc) -> bool:
@@ -1083,13 +1089,8 @@ def _names_parameters(doc) -> bool:
 def params_file_problem(args) -> str:
     """What is wrong with a ``--params-file`` among the ROS arguments ('' if nothing): a file
     that cannot be read, is not YAML, or names no ``ros__parameters``."""
-    in_ros = False
-    for i, arg in enumerate(args):
-        if arg == "--ros-args":
-            in_ros = True
-        elif arg == "--":
-            in_ros = False
-        elif in_ros and arg == "--params-file" and i + 1 < len(args):
+    for i, arg, in_ros in _ros_sections(args):
+        if in_ros and arg == "--params-file" and i + 1 < len(args):
             path = args[i + 1]
             try:
                 with open(path, encoding="utf-8") as f:
