@@ -337,13 +337,22 @@ def _constant_channel(instances, tolerance: float = 0.01):
     return (c, float(np.median(p[:, c]))) if std[c] < tolerance else None
 
 
+def _lost_text(lost) -> str:
+    """The words for a (channel, value) of :func:`_constant_channel`."""
+    return f"NOCS channel {lost[0]} is {lost[1]:.3f} on every object"
+
+
 def _lost_channel_hint(instances) -> str:
     """For a frame refused before the objects' fits: a note naming a NOCS channel constant on
     every object (a dead network output or an image that lost a channel), or ''."""
     lost = _constant_channel(instances)
-    if lost is None:
-        return ""
-    return (f"; NOCS channel {lost[0]} is {lost[1]:.3f} on every object: a lost channel?")
+    return "" if lost is None else f"; {_lost_text(lost)}: a lost channel?"
+
+
+def _noise_reason(inst) -> str:
+    """Why an object whose NOCS are noise (``sigma_p`` >= _NOISE_NOT_SHAPE) is no shape."""
+    return (f"its NOCS vary by {inst.sigma_p:.2f} from pixel to pixel: noise, not a shape "
+            "(random or shuffled NOCS?)")
 
 
 def _flat_reason(ratios) -> str | None:
@@ -588,13 +597,14 @@ def estimate_focal(
         & np.array([why is None for why in flat])
     )
     for k, inst in enumerate(support):
-        noisy = (f"its NOCS vary by {inst.sigma_p:.2f} from pixel to pixel: noise, not a shape "
-                 "(random or shuffled NOCS?)" if inst.sigma_p >= _NOISE_NOT_SHAPE else None)
+        noisy = inst.sigma_p >= _NOISE_NOT_SHAPE
         if not fits.ok[k] or not np.isfinite(fits.var_log_focal[k]):
-            est.rejected[inst.instance_id] = "degenerate fit" + (f"; {noisy}" if noisy else "")
+            est.rejected[inst.instance_id] = (
+                "degenerate fit" + (f"; {_noise_reason(inst)}" if noisy else ""))
         elif spread[k] < opt.min_nocs_spread and noisy:
             # Denoising and the calibration keep of the NOCS what neighbouring pixels share.
-            est.rejected[inst.instance_id] = f"{noisy}; their span {spread[k]:.3f} once denoised"
+            est.rejected[inst.instance_id] = (
+                f"{_noise_reason(inst)}; their span {spread[k]:.3f} once denoised")
         elif spread[k] < opt.min_nocs_spread:
             est.rejected[inst.instance_id] = (
                 f"its NOCS span {spread[k]:.3f} (< {opt.min_nocs_spread}): "
@@ -617,8 +627,8 @@ def estimate_focal(
         # left 5). Any object that reads flat raises the question, also one refused for
         # another reason first (a user's 120 frames: 11 answered when only objects that passed
         # the other checks could, 2 now). One object's flat NOCS refuse only that object.
-        est.reason = (f"object {first_flat[0]}: {first_flat[1]} NOCS channel {lost[0]} is "
-                      f"{lost[1]:.3f} on every object: the frame is refused")
+        est.reason = (f"object {first_flat[0]}: {first_flat[1]} {_lost_text(lost)}: the frame "
+                      "is refused")
         return est
     est.mirrored = [
         inst.instance_id for k, inst in enumerate(support) if good[k] and fits.mirrored[k]
