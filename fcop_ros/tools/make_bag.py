@@ -26,6 +26,7 @@ from ..synthetic import PRESETS, SequenceSpec, camera_sequence
 TOPICS = dict(depth="/camera/depth", nocs="/camera/nocs", mask="/camera/mask",
               truth="/camera/camera_info_true", poses="/camera/object_poses_true")
 FRAME_ID = "camera_optical_frame"
+START_NS = 1_700_000_000_000_000_000  # the first frame's stamp (November 2023)
 
 
 def _stamp_step(rate: float, frames: int, start_ns: int) -> int:
@@ -46,7 +47,7 @@ def _stamp_step(rate: float, frames: int, start_ns: int) -> int:
 def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0,
              storage: str = "mcap", depth_encoding: str = "32FC1", nocs_encoding: str = "32FC3",
              mask_encoding: str = "mono8", depth_scale: float = 0.001,
-             start_ns: int = 1_700_000_000_000_000_000, progress=None,
+             start_ns: int = START_NS, progress=None,
              compression: str = "none") -> int:
     """Write the bag; returns the number of frames. Stamps start at ``start_ns``, 1/rate apart.
     ``progress(frames written)`` is called after every frame."""
@@ -117,7 +118,7 @@ def main(argv=None) -> int:
     try:
         spec = SequenceSpec(args.frames, args.width, args.height, args.focal, args.zoom_frame,
                             args.zoom_focal, args.preset, args.objects)
-        _stamp_step(args.rate, spec.frames, 1_700_000_000_000_000_000)
+        _stamp_step(args.rate, spec.frames, START_NS)
     except ValueError as exc:
         print(f"fcop_make_bag: {exc}", file=sys.stderr)
         return 2

@@ -138,6 +138,10 @@ def write_frame(prefix: Path, depth: np.ndarray, nocs: np.ndarray, mask: np.ndar
     Path(str(prefix) + "_meta.txt").write_text("\n".join(lines) + "\n")
 
 
+CSV_FIELDS = ["scene", "frame", "focal_true", "focal", "error_pct", "objects", "inlier_ratio",
+              "reason"]
+
+
 def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None,
              use_principal_point=True, progress=None, options=None):
     """Estimate every frame (with ``options``, an EstimatorOptions; default fcop_ros's); return
@@ -192,10 +196,6 @@ def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None,
     summary = {s: _median_abs(rs) for s, rs in sorted(scenes.items())}
     summary["all"] = _median_abs(rows)
     return rows, summary
-
-
-CSV_FIELDS = ["scene", "frame", "focal_true", "focal", "error_pct", "objects", "inlier_ratio",
-              "reason"]
 
 
 def _median_abs(rows):
