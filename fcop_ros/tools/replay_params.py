@@ -128,8 +128,8 @@ def check_parameters(values: dict, where: dict) -> dict:
     """Check names, types, ranges and choices against fcop_node's declared parameters; return the
     values with integers given for double parameters made doubles. ``where`` names the source."""
     from ..ros.node import qos_override_problem
-    from ..ros.params import (PARAMETERS, ParameterError, check_combination, check_value,
-                              defaults)
+    from ..ros.params import (PARAMETERS, ParameterError, allowed, check_combination,
+                              check_value, defaults)
 
     known = sorted(PARAMETERS)
     out = {}
@@ -154,25 +154,11 @@ def check_parameters(values: dict, where: dict) -> dict:
                 f"unknown parameter {name!r} from {src}{hint}; fcop_node's parameters: "
                 f"{', '.join(known)}"
             )
-        spec = PARAMETERS[name]
-        default = spec.default
-        if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        if type(value) is not type(default):
-            raise ReplayError(
-                f"parameter {name} from {src} must be {type(default).__name__}, got {value!r}"
-            )
-        lo, hi = spec.range or (None, None)
-        if spec.range is not None and not isinstance(value, bool) and not lo <= value <= hi:
-            raise ReplayError(f"parameter {name}={value} from {src} is outside [{lo}, {hi}]")
-        if spec.choices and value not in spec.choices:
-            raise ReplayError(
-                f"parameter {name}={value!r} from {src} must be one of: {', '.join(spec.choices)}"
-            )
-        try:  # what a descriptor cannot say, e.g. camera_name's characters
-            check_value(name, value)
-        except ParameterError as exc:
-            raise ReplayError(f"{exc} (from {src})") from None
+        try:  # type, range, choices and what a descriptor cannot say, as the node checks them
+            value = check_value(name, value)
+        except ParameterError:
+            raise ReplayError(f"parameter {name}={value!r} from {src} is not allowed: "
+                              f"{allowed(name)}") from None
         out[name] = value
 
     full = defaults()
