@@ -29,8 +29,9 @@ EXIT_CODES = {
     EXIT_OK: "done",
     EXIT_NOTHING: "nothing was estimated (the topics never matched or gave no evidence)",
     EXIT_INPUT: (
-        "unusable input or arguments: missing bag, unknown topic, wrong type, unsupported "
-        "encoding, unknown parameter name, invalid parameter value or --params-file"
+        "unusable input or arguments: missing bag or one that cannot be opened at all, unknown "
+        "topic, wrong type, unsupported encoding, unknown parameter name, invalid parameter "
+        "value or --params-file"
     ),
     EXIT_DAMAGED: (
         "the bag is damaged: read (replayed or played) up to the damage; outputs keep what came "
