@@ -19,6 +19,7 @@ from .input_images import (
     stamp_ns,
     time_from_ns,
     time_to_ns,
+    to_fcop_convention,
 )
 from .output_messages import camera_info, marker_array, object_poses, pose_array
 
@@ -43,4 +44,5 @@ __all__ = [
     "stamp_ns",
     "time_from_ns",
     "time_to_ns",
+    "to_fcop_convention",
 ]

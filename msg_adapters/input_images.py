@@ -88,6 +88,15 @@ def nocs_from_image(msg: Image, role: str = "nocs") -> np.ndarray:
     return arr.astype(np.float32, copy=False)
 
 
+def to_fcop_convention(nocs: np.ndarray) -> np.ndarray:
+    """NOCS of the NOCS dataset's convention (z flipped) in this package's: z = 1 - z on every
+    pixel with a prediction (all-zero pixels stay all-zero: no prediction)."""
+    out = np.array(nocs, dtype=np.float32, copy=True)
+    valid = np.any(out != 0, axis=2)
+    out[..., 2] = np.where(valid, 1.0 - out[..., 2], out[..., 2])
+    return out
+
+
 def mask_from_image(msg: Image, role: str = "mask") -> np.ndarray:
     """(H,W) integer instance ids in the encoding's own type (uint8, uint16 or int32),
     0 = background. Unsigned ids stay unsigned: the estimator then needs no pass to clip

@@ -16,7 +16,7 @@ from sensor_msgs.msg import CameraInfo
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
-from fcop_ros.ros.node import to_fcop_convention
+from msg_adapters import to_fcop_convention
 from fcop_ros.synthetic.scenes import camera_frame as cam, noisy_frame
 from ros_helpers import Recorder, frame_messages, ros_context, rotation_errors, spin_until
 

@@ -11,11 +11,9 @@ publishing never waits for the estimator, and the estimator never works on a bac
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import difflib
 import os
-import re
 import sys
 import threading
 import time
@@ -24,7 +22,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import rclpy
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import SetParametersResult
@@ -33,14 +30,6 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import (
-    DurabilityPolicy,
-    HistoryPolicy,
-    LivelinessPolicy,
-    QoSProfile,
-    ReliabilityPolicy,
-    qos_profile_sensor_data,
-)
 from rclpy.qos_overriding_options import InvalidQosOverridesError, QoSOverridingOptions
 from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
@@ -57,12 +46,14 @@ from msg_adapters import (
     object_poses,
     pose_array,
     stamp_ns,
+    to_fcop_convention,
 )
 
 from ..core import FocalWindow, compiled, estimate_focal, estimate_poses
 from ..core.camera import image_centre, inside_image
 from .allocator import limit_allocator_arenas
 from .calibration import default_calibration_path, write_calibration
+from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
 from .params import (
     ESTIMATOR_PARAMETERS,
@@ -77,44 +68,13 @@ from .params import (
     estimator_options,
     window_options,
 )
+from .qos import input_qos, latched_qos, output_qos, refused_override, unknown_override_hint
 from .sync import StampSynchronizer
 from .throttle import LogThrottle
 from .worker import LatestSlotWorker
 
 INPUTS = ("depth", "nocs", "mask")
 RCLError = _rclpy.RCLError
-# The words a QoS override of each policy takes (rclpy compares them in upper case).
-_QOS_WORDS = {
-    name: tuple(m.lower() for m in policy.__members__ if m != "UNKNOWN")
-    for name, policy in (
-        ("reliability", ReliabilityPolicy),
-        ("history", HistoryPolicy),
-        ("durability", DurabilityPolicy),
-        ("liveliness", LivelinessPolicy),
-    )
-}
-# What a QoS override may change on the node's topics (QoSOverridingOptions'
-# with_default_policies); rclpy declares no parameter for the other policies.
-_QOS_OVERRIDABLE = ("history", "depth", "reliability")
-_QOS_INTEGERS = {
-    "depth": "an integer >= 0",
-    "deadline": "an integer >= 0 (nanoseconds)",
-    "lifespan": "an integer >= 0 (nanoseconds)",
-    "liveliness_lease_duration": "an integer >= 0 (nanoseconds)",
-}
-
-
-def qos_override_problem(policy: str, value) -> str:
-    """What is wrong with ``value`` as the QoS override of ``policy`` ('' if nothing)."""
-    if policy in _QOS_WORDS:
-        ok = isinstance(value, str) and value.lower() in _QOS_WORDS[policy]
-        return "" if ok else "one of " + ", ".join(_QOS_WORDS[policy])
-    if policy in _QOS_INTEGERS:
-        ok = isinstance(value, int) and not isinstance(value, bool) and value >= 0
-        return "" if ok else _QOS_INTEGERS[policy]
-    if policy == "avoid_ros_namespace_conventions":
-        return "" if isinstance(value, bool) else "true or false"
-    return ""
 
 
 @dataclass(frozen=True)
@@ -289,24 +249,19 @@ class FcopNode(Node):
         """ParameterError for a QoS override of this topic's ``kind`` ('subscription' or
         'publisher') that rclpy would refuse with a traceback."""
         prefix = f"qos_overrides.{self.resolve_topic_name(topic)}.{kind}."
-        for name, prm in getattr(self, "_parameter_overrides", {}).items():
-            if name.startswith(prefix) and name[len(prefix):] in _QOS_OVERRIDABLE:
-                problem = qos_override_problem(name[len(prefix):], prm.value)
-                if problem:
-                    raise ParameterError(
-                        f"parameter {name}={prm.value!r} is not allowed: {problem}"
-                    )
+        problem = refused_override(getattr(self, "_parameter_overrides", {}), prefix)
+        if problem:
+            raise ParameterError(problem)
 
     def _create_topics_unchecked(self) -> None:
-        # rclpy writes a topic's QoS overrides into the profile it is handed: each topic gets a
-        # copy of its own, or one override would carry over to every topic created after it.
+        # Each topic gets a profile of its own (see .qos).
         qos_in = QoSOverridingOptions.with_default_policies()
         self._subs = [
             self.create_subscription(
                 Image,
                 name,
                 lambda msg, i=i: self._on_image(i, msg),
-                copy.copy(qos_profile_sensor_data),
+                input_qos(),
                 qos_overriding_options=qos_in,
             )
             for i, name in enumerate(INPUTS)
@@ -315,18 +270,18 @@ class FcopNode(Node):
             CameraInfo,
             "camera_info_in",
             self._on_camera_info_in,
-            copy.copy(qos_profile_sensor_data),
+            input_qos(),
             qos_overriding_options=qos_in,
         )
         qos_out = QoSOverridingOptions.with_default_policies()
         self.pub_info = self.create_publisher(
-            CameraInfo, "camera_info", _output_qos(), qos_overriding_options=qos_out
+            CameraInfo, "camera_info", output_qos(), qos_overriding_options=qos_out
         )
         self.pub_poses = self.create_publisher(
-            PoseArray, "object_poses", _output_qos(), qos_overriding_options=qos_out
+            PoseArray, "object_poses", output_qos(), qos_overriding_options=qos_out
         )
         self.pub_markers = self.create_publisher(
-            MarkerArray, "object_markers", _output_qos(), qos_overriding_options=qos_out
+            MarkerArray, "object_markers", output_qos(), qos_overriding_options=qos_out
         )
         self.pub_latest = self._latched_publisher()
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -337,17 +292,11 @@ class FcopNode(Node):
         ignores it without a word, and a misspelt name would leave its default in force."""
         for name in sorted(getattr(self, "_parameter_overrides", {})):
             if not self.has_parameter(name):
-                close = difflib.get_close_matches(name, list(PARAMETERS), n=1)
-                policy = name.rsplit(".", 1)[-1]
-                if name.startswith("qos_overrides.") and policy in _QOS_OVERRIDABLE:
-                    topics = sorted(s.topic_name for s in self._subs + [self.sub_info_in])
-                    hint = (f" (the topics that take QoS overrides: {', '.join(topics)}, "
-                            f"{self.pub_info.topic_name}, {self.pub_poses.topic_name}, "
-                            f"{self.pub_markers.topic_name})")
-                elif name.startswith("qos_overrides.") and (
-                        policy in _QOS_WORDS or policy in _QOS_INTEGERS):
-                    hint = f" (QoS overrides take {', '.join(_QOS_OVERRIDABLE)} here)"
-                else:
+                topics = sorted(s.topic_name for s in self._subs + [self.sub_info_in]) + [
+                    p.topic_name for p in (self.pub_info, self.pub_poses, self.pub_markers)]
+                hint = unknown_override_hint(name, topics)
+                if not hint:
+                    close = difflib.get_close_matches(name, list(PARAMETERS), n=1)
                     hint = f" (did you mean {close[0]}?)" if close else ""
                 self.get_logger().warning(
                     f"fcop_node: parameter {name} is not one of this node's; ignored{hint}"
@@ -884,13 +833,7 @@ class FcopNode(Node):
 
     # ----- services
     def _latched_publisher(self):
-        latched = QoSProfile(
-            depth=1,
-            history=HistoryPolicy.KEEP_LAST,
-            reliability=ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.TRANSIENT_LOCAL,
-        )
-        return self.create_publisher(CameraInfo, "~/latest_camera_info", latched)
+        return self.create_publisher(CameraInfo, "~/latest_camera_info", latched_qos())
 
     def _on_reset(self, request, response):
         with self._lock:
@@ -1018,92 +961,8 @@ class FcopNode(Node):
         return super().destroy_node()
 
 
-def _output_qos() -> QoSProfile:
-    """A new profile of the outputs: reliable, volatile, keep last 10, spelled out (the "system
-    default" profile leaves the durability to the RMW, and Fast DDS then makes the writer
-    transient local)."""
-    return QoSProfile(
-        depth=10,
-        history=HistoryPolicy.KEEP_LAST,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.VOLATILE,
-    )
-
-
-def to_fcop_convention(nocs: np.ndarray) -> np.ndarray:
-    """NOCS of the NOCS dataset's convention (z flipped) in this package's: z = 1 - z on every
-    pixel with a prediction (all-zero pixels stay all-zero: no prediction)."""
-    out = np.array(nocs, dtype=np.float32, copy=True)
-    valid = np.any(out != 0, axis=2)
-    out[..., 2] = np.where(valid, 1.0 - out[..., 2], out[..., 2])
-    return out
-
-
 def _sec(stamp) -> str:
     return "none" if stamp is None else f"{stamp / 1e9:.3f} s"
-
-
-USAGE = """usage: fcop_node [-h] [--ros-args [-r FROM:=TO] [-p NAME:=VALUE]
-                 [--params-file FILE] ...]
-
-Estimates the camera's focal length from depth, NOCS and instance-mask images (topics depth,
-nocs, mask; relative, remappable) and publishes CameraInfo, object poses, markers and
-/diagnostics. Parameters, their defaults and ranges: config/fcop.yaml (installed as
-share/fcop_ros/config/fcop.yaml) and the README's parameter table; at run time
-`ros2 param describe <node> <name>`.
-
-exit codes: 0 after a clean shutdown (Ctrl-C, SIGTERM); 2 for a parameter or params file it
-cannot run with (one line on stderr)."""
-
-
-def _ros_sections(args):
-    """(index, argument, whether it stands inside a ``--ros-args`` ... ``--`` section) of each
-    command-line argument but the section markers."""
-    in_ros = False
-    for i, arg in enumerate(args):
-        if arg == "--ros-args":
-            in_ros = True
-        elif arg == "--":
-            in_ros = False
-        else:
-            yield i, arg, in_ros
-
-
-def wants_help(args) -> bool:
-    """Whether ``-h`` or ``--help`` stands among the arguments outside ``--ros-args`` (rclpy
-    ignores them; the node would start)."""
-    return any(i > 0 and not in_ros and arg in ("-h", "--help")
-               for i, arg, in_ros in _ros_sections(args))
-
-
-def _names_parameters(doc) -> bool:
-    """Whether a params file's YAML names parameters as rcl reads them: mappings of node names
-    (under namespaces, or ``/**``) down to a ``ros__parameters`` mapping."""
-    if not isinstance(doc, dict):
-        return False
-    return any(key == "ros__parameters" and isinstance(value, dict)
-               or key != "ros__parameters" and _names_parameters(value)
-               for key, value in doc.items())
-
-
-def params_file_problem(args) -> str:
-    """What is wrong with a ``--params-file`` among the ROS arguments ('' if nothing): a file
-    that cannot be read, is not YAML, or names no ``ros__parameters``."""
-    for i, arg, in_ros in _ros_sections(args):
-        if in_ros and arg == "--params-file" and i + 1 < len(args):
-            path = args[i + 1]
-            try:
-                with open(path, encoding="utf-8") as f:
-                    doc = yaml.safe_load(f)
-            except OSError as exc:
-                return f"cannot read params file {path}: {exc.strerror or exc}"
-            except yaml.YAMLError as exc:
-                return f"params file {path} is not YAML: {' '.join(str(exc).split())}"
-            if not _names_parameters(doc):
-                return (f"params file {path} names no parameters: it wants "
-                        "'<node name or /**>: ros__parameters: {name: value}' "
-                        "(see config/fcop.yaml)")
-    return ""
 
 
 def main(args=None) -> int:
@@ -1124,8 +983,7 @@ def main(args=None) -> int:
     except RCLError as exc:  # rcl parses --params-file here: a missing or broken file
         if "params file" not in str(exc):
             raise
-        # One line: rcl's words without the source locations it appends.
-        print(f"fcop_node: {re.sub(r', at [^,]+:[0-9]+', '', str(exc))}", file=sys.stderr)
+        print(f"fcop_node: {rcl_params_error(exc)}", file=sys.stderr)
         return 2
     node = None
     try:

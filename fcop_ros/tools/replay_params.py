@@ -127,7 +127,7 @@ def parse_overrides(overrides) -> dict:
 def check_parameters(values: dict, where: dict) -> dict:
     """Check names, types, ranges and choices against fcop_node's declared parameters; return the
     values with integers given for double parameters made doubles. ``where`` names the source."""
-    from ..ros.node import qos_override_problem
+    from ..ros.qos import qos_override_problem
     from ..ros.params import (PARAMETERS, ParameterError, allowed, check_combination,
                               check_value, defaults)
 
