@@ -9,6 +9,7 @@ from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from fcop_ros.ros.spin import ros_context, spin_until  # noqa: F401 (re-exported for the tests)
@@ -60,6 +61,15 @@ class Harness:
         executor.add_node(self.node)
         executor.add_node(self.tester)
         assert spin_until(executor, lambda: all(p.get_subscription_count() for p in self.pubs), 10)
+
+    def trigger(self, service: str):
+        """Call the node's std_srvs/Trigger service ``~/<service>`` and return its response."""
+        client = self.tester.create_client(Trigger, f"/fcop_node/{service}")
+        assert client.wait_for_service(timeout_sec=5.0)
+        fut = client.call_async(Trigger.Request())
+        assert spin_until(self.ex, fut.done, 10)
+        self.tester.destroy_client(client)
+        return fut.result()
 
     def send(self, msgs, which=(0, 1, 2)):
         for i in which:

@@ -198,10 +198,7 @@ def test_stamps_seen_before_a_restart_get_their_camera_info_again(harness, resta
         assert h.frame(frame_messages(cam(k), stamp))
     assert spin_until(h.ex, lambda: len(h.info) == 16, 10)
     if restart == "reset_service":
-        client = h.tester.create_client(Trigger, "/fcop_node/reset")
-        assert client.wait_for_service(timeout_sec=5.0)
-        fut = client.call_async(Trigger.Request())
-        assert spin_until(h.ex, fut.done, 10) and fut.result().success
+        assert h.trigger("reset").success
     # A looped bag's jump back is held until its third frame confirms it; the first frames after
     # a restart may go before there is an estimate again (the hand-off keeps the newest).
     first = 3 if restart == "looped_bag" else 1

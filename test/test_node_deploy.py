@@ -14,7 +14,6 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo
 from sensor_msgs.srv import SetCameraInfo
-from std_srvs.srv import Trigger
 
 from msg_adapters import to_fcop_convention
 from fcop_ros.synthetic.scenes import camera_frame as cam, noisy_frame
@@ -171,14 +170,6 @@ def test_camera_info_in_of_another_size_rejects_frames(harness):
 
 # ----- ~/save_calibration (issue 10.4)
 
-def call_save(h):
-    client = h.tester.create_client(Trigger, "/fcop_node/save_calibration")
-    assert client.wait_for_service(timeout_sec=5.0)
-    fut = client.call_async(Trigger.Request())
-    assert spin_until(h.ex, fut.done, 10)
-    return fut.result()
-
-
 def test_save_calibration_writes_what_camera_info_manager_loads(harness, tmp_path):
     path = tmp_path / "cal" / "left.yaml"
     received = []
@@ -192,12 +183,12 @@ def test_save_calibration_writes_what_camera_info_manager_loads(harness, tmp_pat
         response.success, response.status_message = True, "stored"
         return response
     h.tester.create_service(SetCameraInfo, "/driver/set_camera_info", on_set)
-    res = call_save(h)
+    res = h.trigger("save_calibration")
     assert not res.success and "no focal estimate" in res.message and not path.exists()
     send_driver_info(h, driver_info(d=(0.0,) * 5))
     assert h.frame(frame_messages(cam(0), T0))
     assert spin_until(h.ex, lambda: h.node.set_info_client.service_is_ready(), 10)
-    res = call_save(h)
+    res = h.trigger("save_calibration")
     assert res.success and str(path) in res.message, res.message
     assert spin_until(h.ex, lambda: len(received) == 1, 10)
     focal = h.node.window.current.focal
@@ -234,7 +225,7 @@ def test_save_calibration_refuses_an_uncertain_estimate(harness, tmp_path):
     assert h.frame(frame_messages(noisy_frame(0, "moderate"), T0))
     std = h.node.window.current.std_rel
     assert h.node.window.current.focal is not None and std > 1e-6
-    res = call_save(h)
+    res = h.trigger("save_calibration")
     assert not res.success and "above max_uncertainty" in res.message and not path.exists()
 
 
@@ -243,7 +234,8 @@ def test_default_calibration_file_is_under_ros_camera_info(harness, tmp_path, mo
     h = harness(parameter_overrides=[Parameter("camera_name", value="front")])
     assert h.node.calibration_path() == str(tmp_path / ".ros" / "camera_info" / "front.yaml")
     assert h.frame(frame_messages(cam(0), T0))
-    assert call_save(h).success and (tmp_path / ".ros" / "camera_info" / "front.yaml").is_file()
+    assert h.trigger("save_calibration").success
+    assert (tmp_path / ".ros" / "camera_info" / "front.yaml").is_file()
 
 
 # ----- NOCS conventions (issue 10.5)

@@ -459,28 +459,20 @@ def check_nocs_convention(h):
     assert np.median(rotation_errors(h.poses.msgs[1], h.markers.msgs[1], fr)) > 20.0
 
 
-def _save(h):
-    client = h.tester.create_client(Trigger, "/fcop_node/save_calibration")
-    assert client.wait_for_service(timeout_sec=5.0)
-    fut = client.call_async(Trigger.Request())
-    assert spin_until(h.ex, fut.done, 10)
-    return fut.result()
-
-
 def check_camera_name(h, tmp_path):
     set_ok(h, calibration_file=str(tmp_path / "c.yaml"))
     frames_then(h, 1)
     set_ok(h, camera_name="left_cam")
-    assert _save(h).success
+    assert h.trigger("save_calibration").success
     assert yaml.safe_load((tmp_path / "c.yaml").read_text())["camera_name"] == "left_cam"
 
 
 def check_calibration_file(h, tmp_path):
     frames_then(h, 1)
     set_ok(h, calibration_file=str(tmp_path / "a.yaml"))
-    assert _save(h).success and (tmp_path / "a.yaml").is_file()
+    assert h.trigger("save_calibration").success and (tmp_path / "a.yaml").is_file()
     set_ok(h, calibration_file=str(tmp_path / "sub" / "b.yaml"))
-    assert _save(h).success and (tmp_path / "sub" / "b.yaml").is_file()
+    assert h.trigger("save_calibration").success and (tmp_path / "sub" / "b.yaml").is_file()
 
 
 BEHAVIOUR = {
