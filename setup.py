@@ -38,11 +38,11 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "fcop_node = fcop_ros.ros.node:main",
-            "fcop_demo = fcop_ros.tools.demo:main",
-            "fcop_replay = fcop_ros.tools.replay:main",
-            "fcop_make_bag = fcop_ros.tools.make_bag:main",
-            "fcop_eval_nocs = fcop_ros.tools.nocs_eval:main",
+            "fcop_node = fcop_ros.entry_points:fcop_node",
+            "fcop_demo = fcop_ros.entry_points:fcop_demo",
+            "fcop_replay = fcop_ros.entry_points:fcop_replay",
+            "fcop_make_bag = fcop_ros.entry_points:fcop_make_bag",
+            "fcop_eval_nocs = fcop_ros.entry_points:fcop_eval_nocs",
         ],
     },
 )
