@@ -1,5 +1,5 @@
-"""The node's plain parts, each alone: the parameter schema, the one-slot worker and the
-diagnostics builder (no DDS, no node)."""
+"""The node's plain parts, each alone: the parameter schema, the one-slot worker, the
+diagnostics builder and the intrinsics of its CameraInfo (no DDS, no node)."""
 
 import threading
 
@@ -359,3 +359,56 @@ def test_calibration_file_round_trips_through_yaml(tmp_path):
     assert doc["camera_matrix"]["data"] == [612.5, 0.0, 319.5, 0.0, 612.5, 239.5, 0.0, 0.0, 1.0]
     assert doc["distortion_model"] == "plumb_bob" and len(doc["projection_matrix"]["data"]) == 12
     assert [p.name for p in path.parent.iterdir()] == ["cam.yaml"]  # no temporary file left
+
+
+# ----- the intrinsics every CameraInfo carries
+
+
+def _cam_in(w=640, h=480, cx=0.0, cy=0.0, model="", d=(), r=(1, 0, 0, 0, 1, 0, 0, 0, 1)):
+    from sensor_msgs.msg import CameraInfo
+
+    msg = CameraInfo(width=w, height=h, distortion_model=model, d=list(d))
+    msg.k[2], msg.k[5] = cx, cy
+    msg.r = [float(v) for v in r]
+    return msg
+
+
+def test_principal_point_per_axis_from_parameter_then_camera_info_in_then_centre():
+    from fcop_ros.ros.intrinsics import intrinsics
+
+    p = {"principal_point_x": -1.0, "principal_point_y": -1.0}
+    assert intrinsics(p, None, 640, 480) == intrinsics(p, _cam_in(), 640, 480)
+    assert (intrinsics(p, None, 640, 480).cx, intrinsics(p, None, 640, 480).cy) == (319.5, 239.5)
+    got = intrinsics(p, _cam_in(cx=300.0, cy=250.0), 640, 480)
+    assert (got.cx, got.cy, got.distortion_model) == (300.0, 250.0, None)
+    got = intrinsics(dict(p, principal_point_y=200.0), _cam_in(cx=300.0, cy=250.0), 640, 480)
+    assert (got.cx, got.cy) == (300.0, 200.0)
+
+
+@pytest.mark.parametrize("params, cam, reason", [
+    ({"principal_point_x": 700.0, "principal_point_y": -1.0}, None, "principal_point_outside"),
+    ({"principal_point_x": -1.0, "principal_point_y": -1.0}, _cam_in(320, 240),
+     "camera_info_size_mismatch"),
+])
+def test_intrinsics_refused_name_their_drop_counter(params, cam, reason):
+    from fcop_ros.ros.intrinsics import IntrinsicsRefused, intrinsics
+
+    with pytest.raises(IntrinsicsRefused) as err:
+        intrinsics(params, cam, 640, 480)
+    assert err.value.reason == reason and "640x480" in str(err.value)
+
+
+def test_camera_info_keeps_the_drivers_distortion_and_a_rotation_other_than_none():
+    from fcop_ros.ros.intrinsics import camera_info_with, intrinsics
+
+    p = {"principal_point_x": -1.0, "principal_point_y": -1.0}
+    tilted = (0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    cam = _cam_in(cx=310.0, cy=230.0, model="plumb_bob", d=(0.1, -0.2, 0, 0, 0), r=tilted)
+    info = camera_info_with(600.0, intrinsics(p, cam, 640, 480), 640, 480, None)
+    assert list(info.k) == [600.0, 0.0, 310.0, 0.0, 600.0, 230.0, 0.0, 0.0, 1.0]
+    assert info.distortion_model == "plumb_bob" and list(info.d) == [0.1, -0.2, 0, 0, 0]
+    assert list(info.r) == list(tilted)
+    assert list(info.p) == [600.0, 0.0, 310.0, 0.0, 0.0, 600.0, 230.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+    zero_r = _cam_in(model="plumb_bob", d=(0,) * 5, r=(0,) * 9)  # an unset R: identity
+    info = camera_info_with(600.0, intrinsics(p, zero_r, 640, 480), 640, 480, None)
+    assert list(info.r) == [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]

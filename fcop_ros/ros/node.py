@@ -38,7 +38,6 @@ from visualization_msgs.msg import MarkerArray
 
 from msg_adapters import (
     ImageFormatError,
-    camera_info,
     depth_from_image,
     marker_array,
     mask_from_image,
@@ -50,11 +49,11 @@ from msg_adapters import (
 )
 
 from ..core import FocalWindow, compiled, estimate_focal, estimate_poses
-from ..core.camera import image_centre, inside_image
 from .allocator import limit_allocator_arenas
 from .calibration import default_calibration_path, write_calibration
 from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
+from .intrinsics import IntrinsicsRefused, camera_info_with, intrinsics
 from .params import (
     ESTIMATOR_PARAMETERS,
     PARAMETERS,
@@ -109,12 +108,6 @@ class NodeCounts:
     skipped: int
     camera_info_published: int
     rejected: dict
-
-
-class _Reject(Exception):
-    def __init__(self, reason: str, text: str):
-        super().__init__(text)
-        self.reason = reason
 
 
 @dataclasses.dataclass
@@ -425,45 +418,9 @@ class FcopNode(Node):
         self._newest_refusal = ""
         self.worker.clear()
 
-    # ----- intrinsics other than f: parameters, camera_info_in, image centre
-    def _intrinsics(self, w: int, h: int):
-        """(cx, cy, D, distortion model, R) for a w x h image, or _Reject."""
-        p, cam = self.p, self._cam_in
-        if cam is not None and cam.width and cam.height and (cam.width, cam.height) != (w, h):
-            raise _Reject(
-                "camera_info_size_mismatch",
-                f"camera_info_in is {cam.width}x{cam.height}, the images are {w}x{h}",
-            )
-        # Per axis: the parameter if set, else camera_info_in's K if it has one, else the centre.
-        use_cam = cam is not None and (cam.k[2] != 0 or cam.k[5] != 0)
-        fallback = (cam.k[2], cam.k[5]) if use_cam else image_centre(w, h)
-        cx, cy = (
-            p[name] if p[name] >= 0 else default
-            for name, default in zip(("principal_point_x", "principal_point_y"), fallback)
-        )
-        if not inside_image(cx, cy, w, h):
-            raise _Reject(
-                "principal_point_outside",
-                f"principal point ({cx}, {cy}) is outside the {w}x{h} image",
-            )
-        if cam is not None and cam.distortion_model:
-            return (
-                float(cx),
-                float(cy),
-                [float(v) for v in cam.d],
-                cam.distortion_model,
-                [float(v) for v in cam.r],
-            )
-        return float(cx), float(cy), None, None, None
-
     def _camera_info(self, focal: float, w: int, h: int, header):
-        cx, cy, d, model, r = self._intrinsics(w, h)
-        info = camera_info(focal, cx, cy, w, h, header)
-        if model is not None:
-            info.distortion_model, info.d = model, d
-            if any(r):
-                info.r = r
-        return info
+        """The CameraInfo at ``focal`` for a w x h image, or IntrinsicsRefused."""
+        return camera_info_with(focal, intrinsics(self.p, self._cam_in, w, h), w, h, header)
 
     def _on_camera_info_in(self, msg: CameraInfo) -> None:
         bad = [name for name, values in (("K", msg.k), ("D", msg.d), ("R", msg.r))
@@ -575,7 +532,7 @@ class FcopNode(Node):
                 return
             try:
                 info = self._camera_info(est.focal, est.width, est.height, msg.header)
-            except _Reject:
+            except IntrinsicsRefused:
                 self._remember(self._unanswered, stamp)
                 return
             self._publish_info(stamp, info, est.window, self._last_objects)
@@ -733,8 +690,8 @@ class FcopNode(Node):
         h, w = depth.shape
         try:
             with self._lock:
-                cx, cy, _, _, _ = self._intrinsics(w, h)
-        except _Reject as exc:
+                intr = intrinsics(p, self._cam_in, w, h)
+        except IntrinsicsRefused as exc:
             return self._refuse_frame(exc.reason, str(exc))
         if p["nocs_convention"] == "nocs_dataset":
             nocs = to_fcop_convention(nocs)
@@ -742,7 +699,7 @@ class FcopNode(Node):
             depth,
             nocs,
             mask,
-            (cx, cy),
+            (intr.cx, intr.cy),
             options=self.estimator_options,
             poses=False,
             seed=int(self._rng.integers(2**31)),
@@ -811,7 +768,7 @@ class FcopNode(Node):
                     self._publish_info(
                         stamp, self._camera_info(ready.focal, w, h, depth_msg.header), win, []
                     )
-                except _Reject:
+                except IntrinsicsRefused:
                     pass
         objects = []
         if p["publish_poses"] or p["publish_markers"]:
@@ -879,7 +836,7 @@ class FcopNode(Node):
         try:
             with self._lock:
                 info = self._camera_info(est.focal, est.width, est.height, None)
-        except _Reject as exc:
+        except IntrinsicsRefused as exc:
             response.message = str(exc)
             return response
         path = self.calibration_path()
