@@ -412,3 +412,22 @@ def test_camera_info_keeps_the_drivers_distortion_and_a_rotation_other_than_none
     zero_r = _cam_in(model="plumb_bob", d=(0,) * 5, r=(0,) * 9)  # an unset R: identity
     info = camera_info_with(600.0, intrinsics(p, zero_r, 640, 480), 640, 480, None)
     assert list(info.r) == [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+
+
+# ----- the publish gate
+
+
+@pytest.mark.parametrize("window, words", [
+    (WindowEstimate(None, reason="no frames yet"), "no focal estimate yet: no frames yet"),
+    (WindowEstimate(600.0, std_rel=None), "std_rel unknown above max_uncertainty 0.05"),
+    (WindowEstimate(600.0, std_rel=0.06), "focal 600.0 px held back: std_rel 0.0600 above"),
+    (WindowEstimate(650.0, std_rel=0.01), "focal 650.0 px held back: outside focal_range "
+                                           "[300, 640]"),
+    (WindowEstimate(600.0, std_rel=0.05), ""),  # at max_uncertainty: it goes out
+    (WindowEstimate(640.0, std_rel=0.01), ""),  # at focal_max
+])
+def test_the_gate_says_why_a_focal_is_held_back(window, words):
+    from fcop_ros.ros.gate import held_back
+
+    why = held_back(window, 0.05, (300.0, 640.0))
+    assert words in why if words else why == ""

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
+from .gate import held_back
+
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
 
@@ -122,19 +124,10 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         level, message = WARN, f"no focal estimate yet: {win.reason}"
         if d.last_reason:
             message += f"; the newest frame: {d.last_reason}"
-    elif not d.focal_range[0] <= win.focal <= d.focal_range[1]:
-        level = WARN
-        message = (
-            f"focal {win.focal:.1f} px held back: outside focal_range "
-            f"[{d.focal_range[0]:g}, {d.focal_range[1]:g}]"
-        )
     elif not d.publishable:
         level = WARN
-        message = (
-            f"focal {win.focal:.1f} px held back: std_rel "
-            f"{'unknown' if std is None else f'{std:.4f}'} above max_uncertainty "
-            f"{d.max_uncertainty}"
-        )
+        message = (held_back(win, d.max_uncertainty, d.focal_range)
+                   or f"focal {win.focal:.1f} px held back: no image size yet")
     elif rates.answered > 0 and rates.matched == 0:
         level = WARN
         message = (

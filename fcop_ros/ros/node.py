@@ -53,6 +53,7 @@ from .allocator import limit_allocator_arenas
 from .calibration import default_calibration_path, write_calibration
 from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
+from .gate import held_back
 from .intrinsics import IntrinsicsRefused, camera_info_with, intrinsics
 from .params import (
     ESTIMATOR_PARAMETERS,
@@ -388,27 +389,17 @@ class FcopNode(Node):
             self._history.popleft()
         return win
 
-    @staticmethod
-    def _in_focal_range(focal: float, p: dict) -> bool:
-        """focal_range (parameters ``p``) bounds every published focal, also one the window
-        holds from frames estimated before the range was changed at run time."""
-        return p["focal_min"] <= focal <= p["focal_max"]
-
     def _update_estimate_locked(self, win) -> None:
-        """The publish gate: the window's focal goes out only within max_uncertainty and
-        focal_range."""
-        std = getattr(win, "std_rel", None)
-        if (
-            win.focal is None
-            or std is None
-            or std > self.p["max_uncertainty"]
-            or not self._in_focal_range(win.focal, self.p)
-            or self._size is None
-        ):
+        """The publish gate (see .gate): the window's focal goes out only within max_uncertainty
+        and focal_range, which bounds also a focal the window holds from frames estimated
+        before the range was changed at run time."""
+        p = self.p
+        if self._size is None or held_back(win, p["max_uncertainty"],
+                                           (p["focal_min"], p["focal_max"])):
             self._estimate = None
         else:
             self._estimate = _Publishable(
-                float(win.focal), float(std), self._size[0], self._size[1], win
+                float(win.focal), float(win.std_rel), self._size[0], self._size[1], win
             )
 
     def _reset_locked(self) -> None:
@@ -818,18 +809,9 @@ class FcopNode(Node):
             est, win = self._estimate, self.window.current
             p = dict(self.p)
         response.success = False
-        std = getattr(win, "std_rel", None)
-        if win.focal is None:
-            response.message = f"no focal estimate yet: {win.reason}"
-        elif std is None:
-            response.message = "the focal estimate has no uncertainty yet"
-        elif est is None and not self._in_focal_range(win.focal, p):
-            response.message = (
-                f"focal {win.focal:.1f} px is outside focal_range "
-                f"[{p['focal_min']:g}, {p['focal_max']:g}]"
-            )
-        elif est is None:
-            response.message = f"std_rel {std:.4f} is above max_uncertainty {p['max_uncertainty']}"
+        if est is None:
+            response.message = held_back(win, p["max_uncertainty"],
+                                         (p["focal_min"], p["focal_max"])) or "no image yet"
         if est is None:
             self.get_logger().warning(f"fcop_node: calibration not saved: {response.message}")
             return response
