@@ -408,3 +408,28 @@ def test_play_without_subscribers_plays_after_the_wait_and_says_so(tmp_path, cap
                     "--mask-topic", topics[2], "--play", "--wait-subscribers", "-1"])
     err = capsys.readouterr().err
     assert code == rp.EXIT_INPUT and err.strip() == "fcop_replay: --wait-subscribers must be >= 0"
+
+
+def test_bare_mcap_and_a_bag_without_metadata_replay_as_the_bag(tmp_path, capsys):
+    """An .mcap file given alone (Foxglove, a converter) and a bag directory whose recorder
+    died before writing metadata.yaml: both were refused ('is a file', 'no metadata.yaml');
+    now read with the mcap library, they give the bag's own estimates."""
+    bag = tiny_bag(tmp_path / "in", frames=4)
+    topics = ["--depth-topic", mb.TOPICS["depth"], "--nocs-topic", mb.TOPICS["nocs"],
+              "--mask-topic", mb.TOPICS["mask"], "--truth-topic", mb.TOPICS["truth"], "-p",
+              "seed:=1"]
+    assert rp.main([str(bag), *topics, "--out", str(tmp_path / "o0")]) == 0
+    want = read_csv(tmp_path / "o0" / "estimates.csv")
+    mcap_file = next(bag.glob("*.mcap"))
+    assert rp.main([str(mcap_file), *topics, "--out", str(tmp_path / "o1")]) == 0
+    (bag / "metadata.yaml").unlink()
+    assert rp.main([str(bag), *topics, "--out", str(tmp_path / "o2")]) == 0
+    assert "damaged" not in capsys.readouterr().out
+    for out in ("o1", "o2"):
+        got = read_csv(tmp_path / out / "estimates.csv")
+        assert [(r["stamp_ns"], r["focal"]) for r in got] == [
+            (r["stamp_ns"], r["focal"]) for r in want] and len(want) == 4
+    # Neither metadata.yaml nor an .mcap file: not a bag.
+    mcap_file.rename(tmp_path / "elsewhere.mcap")
+    assert rp.main([str(bag), *topics, "--out", str(tmp_path / "o3")]) == 2
+    assert "no metadata.yaml, no .mcap file" in capsys.readouterr().err

@@ -113,22 +113,32 @@ class _os_errors:
 class BagSource:
     """Stream the messages of a bag, surviving damage where the storage allows it.
 
-    A bag rosbags can open is read through rosbags. An MCAP bag it cannot open (a truncated file
-    has no summary at its end) is read sequentially with the mcap library up to the damage;
-    ``damaged`` then says what happened. A damaged sqlite3 bag cannot be salvaged: BagError.
+    A bag rosbags can open is read through rosbags. MCAP that rosbags cannot open is read
+    sequentially with the mcap library, in file order: a bare ``.mcap`` file (Foxglove, a
+    converter), a bag directory whose recorder died before writing metadata.yaml, or a
+    truncated file (no summary at its end), up to the damage; ``damaged`` then says what
+    happened. A damaged sqlite3 bag cannot be salvaged: BagError.
     """
 
     def __init__(self, path):
         self.path = Path(path)
         self.damaged = ""
+        self._reader = None
         if not self.path.exists():
             raise BagError(f"bag not found: {self.path}")
         if self.path.is_file():
-            raise BagError(f"{self.path} is a file; give the bag directory (the one holding "
-                           "metadata.yaml)")
+            if self.path.suffix != ".mcap":
+                raise BagError(f"{self.path} is a file; give the bag directory (the one holding "
+                               "metadata.yaml) or an .mcap file")
+            self._read_mcap([self.path], "")
+            return
         if not (self.path / "metadata.yaml").is_file():
-            raise BagError(f"{self.path} is not a ROS 2 bag directory (no metadata.yaml)")
-        self._reader = None
+            mcaps = sorted(self.path.glob("*.mcap"))
+            if not mcaps:
+                raise BagError(f"{self.path} is not a ROS 2 bag directory (no metadata.yaml, "
+                               "no .mcap file)")
+            self._read_mcap(mcaps, "")
+            return
         try:
             reader = Reader(self.path)
             reader.open()
@@ -138,14 +148,20 @@ class BagSource:
             for c in reader.connections:
                 self.counts[c.topic] = self.counts.get(c.topic, 0) + c.msgcount
         except Exception as exc:  # rosbags raises several types for damaged metadata or storage
-            self._mcap = sorted(self.path.glob("*.mcap"))
-            if not self._mcap:
+            mcaps = sorted(self.path.glob("*.mcap"))
+            if not mcaps:
                 raise BagError(f"cannot open bag {self.path}: {exc}") from exc
-            self.damaged = f"{type(exc).__name__}: {exc}"
-            self.topics, self.counts = self._scan_mcap()
-            if not self.topics:
-                raise BagError(f"cannot open bag {self.path} ({self.damaged}) and no message is "
-                               "readable") from exc
+            self._read_mcap(mcaps, f"{type(exc).__name__}: {exc}", exc)
+
+    def _read_mcap(self, files, damaged: str, cause=None) -> None:
+        """Read ``files`` with the mcap library; ``damaged``: why rosbags could not ('' when
+        rosbags was not asked)."""
+        self._mcap, self.damaged = files, damaged
+        self.topics, self.counts = self._scan_mcap()
+        if not self.topics:
+            why = f" ({self.damaged})" if self.damaged else ""
+            raise BagError(f"cannot open bag {self.path}{why} and no message is "
+                           "readable") from cause
 
     def _records(self):
         """(topic, type, log time, raw) of every readable MCAP message, in file order."""

@@ -56,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=exit_codes_text(),
         formatter_class=HelpFormatter,
     )
-    ap.add_argument("bag", help="ROS 2 bag directory (sqlite3 or mcap)")
+    ap.add_argument("bag", help="ROS 2 bag directory (sqlite3 or mcap), or an .mcap file")
     ap.add_argument(
         "--depth-topic",
         required=True,
