@@ -1,20 +1,42 @@
-"""The console scripts: each imports its tool only when run, so that Ctrl-C during those
-imports (1-2 s of numpy, numba and rclpy) ends it as Ctrl-C later does, without a traceback:
-exit 130 for the tools, 0 for fcop_node (a clean shutdown, as ROS nodes exit)."""
+"""The console scripts: each imports its tool only when run, with Ctrl-C and SIGTERM held
+until the imports are done (1-2 s of numpy, numba and rclpy). Delivered in the middle of
+them, Ctrl-C raised a traceback, or numpy turned it into an ImportError that blamed the
+installation, or Python swallowed it and the node started anyway. A signal that came during
+the imports ends the script as one after them does: exit 130 and one line for the tools, a
+clean 0 for fcop_node."""
 from __future__ import annotations
 
 import importlib
+import signal
 import sys
+
+_HELD = {signal.SIGINT, signal.SIGTERM}
+
+
+def _import_main(module: str):
+    """``module``'s main, imported with _HELD blocked; (main, whether one of them came)."""
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
+    try:
+        main = importlib.import_module(module).main
+    finally:
+        came = signal.sigpending() & _HELD
+        handlers = {s: signal.signal(s, signal.SIG_IGN) for s in came}  # discards them
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+        for s, handler in handlers.items():
+            signal.signal(s, handler)
+    return main, bool(came)
 
 
 def _run(module: str, prog: str, interrupted: int) -> int:
+    main, stopped = _import_main(module)
     try:
-        main = importlib.import_module(module).main
-    except KeyboardInterrupt:
-        if interrupted:
-            print(f"{prog}: interrupted", file=sys.stderr)
-        return interrupted
-    return main()
+        if not stopped:
+            return main()
+    except KeyboardInterrupt:  # one that the tool's own handlers did not catch
+        pass
+    if interrupted:
+        print(f"{prog}: interrupted", file=sys.stderr)
+    return interrupted
 
 
 def fcop_node() -> int:
