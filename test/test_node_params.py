@@ -91,6 +91,9 @@ def test_help_prints_usage_and_does_not_start_the_node():
     ({"focal_min": 30000.0},
      "parameter focal_min=30000.0 is not allowed: it must be below focal_max=20000.0"),
     ({"noise_bound": 0.9}, "parameter noise_bound=0.9 is not allowed: a fraction in (0, 0.5]"),
+    # Both given (as a params file gives them all): the one moved from its default is blamed.
+    ({"focal_min": 50.0, "focal_max": 10.0},
+     "parameter focal_max=10.0 is not allowed: it must be above focal_min=50.0"),
     ({"camera_name": "my camera"}, "parameter camera_name='my camera' is not allowed"),
 ])
 def test_bad_parameter_in_process_raises_parameter_error(overrides, expected):

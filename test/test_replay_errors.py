@@ -68,7 +68,11 @@ INT_1000 = "is not allowed: an integer in [1, 1000]"
     ("window_frames:=abc", f"parameter window_frames='abc' from -p {INT_1000}"),
     ("window_frames:=0", f"parameter window_frames=0 from -p {INT_1000}"),
     ("window_frames:=2.5", f"parameter window_frames=2.5 from -p {INT_1000}"),
-    ("focal_min:=30000.0", "focal_min=30000.0 is not allowed: it must be below focal_max=20000.0"),
+    ("focal_min:=30000.0",
+     "parameter focal_min=30000.0 from -p is not allowed: it must be below focal_max=20000.0"),
+    # The value moved is blamed, not the default it collides with (before: focal_min=50.0).
+    ("focal_max:=10", "parameter focal_max=10.0 from -p is not allowed: it must be above "
+                      "focal_min=50.0"),
     ("sync_mode:=fuzzy",
      "parameter sync_mode='fuzzy' from -p is not allowed: one of exact, approximate"),
     ("publish_poses:=maybe",
@@ -113,6 +117,11 @@ def test_misspelt_parameter_name_is_refused_with_the_known_names(bag, tmp_path, 
             "unknown parameter 'widow_frames' from --params-file",
         ),
         ("fcop_node:\n  window_frames: 4\n", "section 'fcop_node/window_frames' is not a mapping"),
+        # A file giving both: the one moved from its default is blamed.
+        (
+            "/**:\n  ros__parameters:\n    focal_min: 50.0\n    focal_max: 40.0\n",
+            "parameter focal_max=40.0 from --params-file",
+        ),
     ],
 )
 def test_invalid_params_file_is_refused(bag, tmp_path, capsys, content, expected):

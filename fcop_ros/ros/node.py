@@ -315,7 +315,8 @@ class FcopNode(Node):
         self.p = {name: self.get_parameter(name).value for name in PARAMETERS}
         for name, value in self.p.items():
             check_words(name, value)
-        problem = check_combination(self.p)
+        moved = {k for k, v in self.p.items() if v != PARAMETERS[k].default}
+        problem = check_combination(self.p, changed=moved)
         if problem:
             raise ParameterError(problem)
 

@@ -293,30 +293,30 @@ _ORDERED_PAIRS = (
 )
 
 
-def check_combination(p: dict, image_size=None, changed=()) -> str:
-    """What is wrong with a complete set of values together ('' if nothing); ``image_size``
-    (width, height), once known, bounds the principal point. Of two parameters in conflict,
-    the message names the one being ``changed`` (the first of the pair if both or neither)."""
+def combination_conflict(p: dict, image_size=None, changed=()) -> tuple[str, str]:
+    """The parameter to blame for what is wrong with a complete set of values together and the
+    rule it breaks (('', '') if nothing); ``image_size`` (width, height), once known, bounds
+    the principal point. Of two parameters in conflict, the one being ``changed`` is blamed
+    (the first of the pair if both or neither)."""
     for low, high, holds, low_rule, high_rule in _ORDERED_PAIRS:
         if holds(p[low], p[high]):
             continue
         if high in changed and low not in changed:
-            return (f"parameter {high}={p[high]} is not allowed: it must be {high_rule} "
-                    f"{low}={p[low]}")
-        return (f"parameter {low}={p[low]} is not allowed: it must be {low_rule} "
-                f"{high}={p[high]}")
+            return high, f"it must be {high_rule} {low}={p[low]}"
+        return low, f"it must be {low_rule} {high}={p[high]}"
     if p["noise_bound_mode"] == "relative" and not 0 < p["noise_bound"] <= MAX_RELATIVE_BOUND:
-        return (
-            f"parameter noise_bound={p['noise_bound']} is not allowed: a fraction in "
-            f"(0, {MAX_RELATIVE_BOUND}] in relative noise_bound_mode"
-        )
+        return ("noise_bound",
+                f"a fraction in (0, {MAX_RELATIVE_BOUND}] in relative noise_bound_mode")
     if image_size is not None:
         for axis, size in (("x", image_size[0]), ("y", image_size[1])):
             v = p[f"principal_point_{axis}"]
             if v >= 0 and not v <= size - 1:
-                return (
-                    f"parameter principal_point_{axis}={v} is not allowed: inside the "
-                    f"{image_size[0]}x"
-                    f"{image_size[1]} image, [0, {size - 1}] (or negative for the default)"
-                )
-    return ""
+                return (f"principal_point_{axis}", f"inside the {image_size[0]}x{image_size[1]} "
+                        f"image, [0, {size - 1}] (or negative for the default)")
+    return "", ""
+
+
+def check_combination(p: dict, image_size=None, changed=()) -> str:
+    """combination_conflict in one line ('' if nothing is wrong)."""
+    name, rule = combination_conflict(p, image_size, changed)
+    return f"parameter {name}={p[name]} is not allowed: {rule}" if name else ""

@@ -128,8 +128,8 @@ def check_parameters(values: dict, where: dict) -> dict:
     """Check names, types, ranges and choices against fcop_node's declared parameters; return the
     values with integers given for double parameters made doubles. ``where`` names the source."""
     from ..ros.qos import qos_override_problem
-    from ..ros.params import (PARAMETERS, ParameterError, allowed, check_combination,
-                              check_value, defaults)
+    from ..ros.params import (PARAMETERS, ParameterError, allowed, check_value,
+                              combination_conflict, defaults)
 
     known = sorted(PARAMETERS)
     out = {}
@@ -163,9 +163,12 @@ def check_parameters(values: dict, where: dict) -> dict:
 
     full = defaults()
     full.update({k: v for k, v in out.items() if k in PARAMETERS})
-    problem = check_combination(full)
-    if problem:
-        raise ReplayError(f"invalid parameters: {problem}")
+    # Blame the value moved from its default (a params file usually gives them all).
+    moved = {k for k, v in out.items() if k in PARAMETERS and v != PARAMETERS[k].default}
+    name, rule = combination_conflict(full, changed=moved)
+    if name:
+        src = where.get(name, "the node's defaults")
+        raise ReplayError(f"parameter {name}={full[name]!r} from {src} is not allowed: {rule}")
     return out
 
 
