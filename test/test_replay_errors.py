@@ -68,6 +68,9 @@ INT_1000 = "is not allowed: an integer in [1, 1000]"
     ("window_frames:=abc", f"parameter window_frames='abc' from -p {INT_1000}"),
     ("window_frames:=0", f"parameter window_frames=0 from -p {INT_1000}"),
     ("window_frames:=2.5", f"parameter window_frames=2.5 from -p {INT_1000}"),
+    # Text to rcl, so to the node (Python's int() took it: the replay ran what the node refuses).
+    ("window_frames:=1_000", f"parameter window_frames='1_000' from -p {INT_1000}"),
+    ("camera_name:=1", "quote text: -p camera_name:=\"'1'\""),
     ("focal_min:=30000.0",
      "parameter focal_min=30000.0 from -p is not allowed: it must be below focal_max=20000.0"),
     # The value moved is blamed, not the default it collides with (before: focal_min=50.0).
@@ -117,6 +120,16 @@ def test_misspelt_parameter_name_is_refused_with_the_known_names(bag, tmp_path, 
             "unknown parameter 'widow_frames' from --params-file",
         ),
         ("fcop_node:\n  window_frames: 4\n", "section 'fcop_node/window_frames' is not a mapping"),
+        # Text to rcl; PyYAML 1.1 read 1000 and a date.
+        (
+            "/**:\n  ros__parameters:\n    window_frames: 1_000\n",
+            "parameter window_frames='1_000' from --params-file",
+        ),
+        (
+            "/**:\n  ros__parameters:\n    camera_name: 2024-01-01\n    focal_min: 2024-01-01\n",
+            "parameter focal_min='2024-01-01' from --params-file",
+        ),
+        ("/**:\n  ros__parameters:\n    window_frames:\n", "window_frames has no value (line 3)"),
         # A file giving both: the one moved from its default is blamed.
         (
             "/**:\n  ros__parameters:\n    focal_min: 50.0\n    focal_max: 40.0\n",

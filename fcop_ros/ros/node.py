@@ -310,7 +310,7 @@ class FcopNode(Node):
             except ParameterException:
                 value = overrides[name].value if name in overrides else "?"
                 raise ParameterError(
-                    f"parameter {name}={value!r} is not allowed: {allowed(name)}"
+                    f"parameter {name}={value!r} is not allowed: {allowed(name, value)}"
                 ) from None
         self.p = {name: self.get_parameter(name).value for name in PARAMETERS}
         for name, value in self.p.items():

@@ -215,8 +215,9 @@ def defaults() -> dict:
     return {name: spec.default for name, spec in PARAMETERS.items()}
 
 
-def allowed(name: str) -> str:
-    """What parameter ``name`` accepts, in words."""
+def allowed(name: str, value=None) -> str:
+    """What parameter ``name`` accepts, in words; for a string parameter given a number or a
+    bool (``-p camera_name:=1``), how to give that as text."""
     spec = PARAMETERS[name]
     if isinstance(spec.default, bool):
         return "true or false"
@@ -225,7 +226,12 @@ def allowed(name: str) -> str:
     if spec.range is not None:
         kind = "an integer" if isinstance(spec.default, int) else "a number"
         return f"{kind} in [{spec.range[0]}, {spec.range[1]}]"
-    return f"a string ({spec.text_rule})"
+    words = f"a string ({spec.text_rule})"
+    if value is not None and not isinstance(value, str):
+        text = "..." if isinstance(value, bool) else value
+        words += (f"; ROS reads a bare number or yes/no/true/false as that type, so quote "
+                  f"text: -p {name}:=\"'{text}'\"")
+    return words
 
 
 def descriptor(name: str) -> ParameterDescriptor:
@@ -261,7 +267,8 @@ def check_value(name: str, value):
     if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
     if type(value) is not type(default):
-        raise ParameterError(f"parameter {name}={value!r} is not allowed: {allowed(name)}")
+        raise ParameterError(
+            f"parameter {name}={value!r} is not allowed: {allowed(name, value)}")
     if isinstance(value, bool):
         ok = True
     elif spec.choices:

@@ -9,6 +9,7 @@ from pathlib import Path
 import yaml
 
 from ..ros.config import config_path
+from . import rcl_yaml
 from .replay_base import ReplayError
 
 NODE_NAME = "fcop_node"
@@ -58,13 +59,15 @@ def load_params_file(path, node_name: str = NODE_NAME) -> dict:
     except OSError as exc:
         raise ReplayError(f"cannot read --params-file {path}: {exc.strerror or exc}") from None
     try:
-        doc = yaml.safe_load(text)
+        doc = rcl_yaml.load(text)
     except yaml.YAMLError as exc:
         where = getattr(exc, "problem_mark", None)
         at = f" (line {where.line + 1})" if where is not None else ""
         raise ReplayError(
             f"--params-file {path} is not valid YAML{at}: {getattr(exc, 'problem', exc)}"
         ) from None
+    except rcl_yaml.RclYamlError as exc:
+        raise ReplayError(f"--params-file {path}: {exc}") from None
     if not isinstance(doc, dict):
         raise ReplayError(
             f"--params-file {path} is not a ROS 2 parameter file "
@@ -86,30 +89,22 @@ def load_params_file(path, node_name: str = NODE_NAME) -> dict:
     return values
 
 
-_TRUE = {"true", "True", "TRUE", "yes", "Yes", "YES", "on", "On", "ON"}
-_FALSE = {"false", "False", "FALSE", "no", "No", "NO", "off", "Off", "OFF"}
-
-
-def parse_value(text: str):
-    """A -p value typed as rcl types it: bool words, integer, double (1e3 too), [lists], else
-    a string."""
-    if text in _TRUE:
-        return True
-    if text in _FALSE:
-        return False
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    if text.startswith("["):
-        try:
-            return yaml.safe_load(text)
-        except yaml.YAMLError:
-            pass
-    if len(text) >= 2 and text[0] == text[-1] and text[0] in "'\"":
-        return text[1:-1]
-    return text
+def parse_value(text: str, name: str = "NAME"):
+    """A -p value typed as rcl types it (see rcl_yaml): bool words, C integers and doubles,
+    [lists] of one type, quoted text, else text."""
+    try:
+        value = rcl_yaml.load(text, f"-p {name}")
+    except yaml.YAMLError as exc:
+        raise ReplayError(f"-p {name}:={text} is not a YAML value: "
+                          f"{getattr(exc, 'problem', exc)}") from None
+    except rcl_yaml.RclYamlError as exc:
+        raise ReplayError(str(exc)) from None
+    if value is None:
+        raise ReplayError(f"-p {name}:={text} has no value")
+    if isinstance(value, dict):
+        raise ReplayError(f"-p {name}:={text} is a mapping; a parameter's value is one value "
+                          "or a [list]")
+    return value
 
 
 def parse_overrides(overrides) -> dict:
@@ -120,7 +115,7 @@ def parse_overrides(overrides) -> dict:
             raise ReplayError(f"-p expects NAME:=VALUE, got {item!r}")
         if text == "":
             raise ReplayError(f"-p {name}:= has no value")
-        values[name] = parse_value(text)
+        values[name] = parse_value(text, name)
     return values
 
 
@@ -158,7 +153,7 @@ def check_parameters(values: dict, where: dict) -> dict:
             value = check_value(name, value)
         except ParameterError:
             raise ReplayError(f"parameter {name}={value!r} from {src} is not allowed: "
-                              f"{allowed(name)}") from None
+                              f"{allowed(name, value)}") from None
         out[name] = value
 
     full = defaults()
