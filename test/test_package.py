@@ -83,3 +83,24 @@ def test_test_dependencies_are_declared_once():
     test_deps = [e.text for e in root.findall("test_depend")]
     assert "python3-pytest" in test_deps and "python3-yaml" in exec_deps
     assert len(set(exec_deps)) == len(exec_deps) and not set(exec_deps) & set(test_deps)
+
+
+def test_the_package_imports_light_and_reaches_everything_on_use():
+    """``import fcop_ros`` loads neither numpy nor rclpy; its estimator names and subpackages
+    come on first use (a hostile trial found ``fcop_ros.core`` an AttributeError until
+    imported by name, and ``importlib`` among the package's public names)."""
+    import subprocess
+    code = (
+        "import sys, fcop_ros\n"
+        "assert not {'numpy', 'rclpy'} & set(sys.modules), sorted(sys.modules)\n"
+        "assert 'importlib' not in dir(fcop_ros)\n"
+        "assert fcop_ros.core.estimate_focal is fcop_ros.estimate_focal\n"
+        "assert fcop_ros.synthetic.__name__ == 'fcop_ros.synthetic'\n"
+        "assert 'estimate_focal' in vars(fcop_ros)\n"  # resolved once, then a plain attribute
+        "assert 'rclpy' not in sys.modules\n"
+        "try:\n    fcop_ros.nothing\nexcept AttributeError as e:\n    print(e)\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "module 'fcop_ros' has no attribute 'nothing'"
