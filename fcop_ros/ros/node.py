@@ -572,7 +572,8 @@ class FcopNode(Node):
     def _warm_up_kernels(self) -> None:
         """Compile the estimator's kernels (or load them from numba's cache) before the first
         frame; where they cannot be compiled, the numpy paths serve. /diagnostics says so
-        meanwhile (a first run on a machine compiles for up to a minute)."""
+        meanwhile (a first run on a machine compiles for up to a minute). After Ctrl-C the
+        context is gone and the outcome is not logged (rosout would refuse the line)."""
         if compiled.ENABLED:
             self.get_logger().info(
                 "fcop_node: preparing the estimator's kernels (the first run on a machine "
@@ -583,12 +584,13 @@ class FcopNode(Node):
             seconds = compiled.warm_up()
         except Exception as exc:  # noqa: BLE001 - any compiler failure leaves numpy working
             compiled.ENABLED = False
-            self.get_logger().warning(
-                f"fcop_node: the compiled kernels failed to build ({exc!r}); estimating with "
-                "numpy, several times slower"
-            )
+            if self.context.ok():
+                self.get_logger().warning(
+                    f"fcop_node: the compiled kernels failed to build ({exc!r}); estimating "
+                    "with numpy, several times slower"
+                )
         else:
-            if compiled.ENABLED:
+            if compiled.ENABLED and self.context.ok():
                 self.get_logger().info(
                     f"fcop_node: estimator kernels ready ({compiled.describe()}, {seconds:.1f} s)"
                 )
