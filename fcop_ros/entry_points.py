@@ -3,7 +3,8 @@ until the imports are done (1-2 s of numpy, numba and rclpy). Delivered in the m
 them, Ctrl-C raised a traceback, or numpy turned it into an ImportError that blamed the
 installation, or Python swallowed it and the node started anyway. A signal that came during
 the imports ends the script as one after them does: exit 130 and one line for the tools, a
-clean 0 for fcop_node."""
+clean 0 for fcop_node. The tools take SIGTERM as Ctrl-C throughout (its default killed them
+mid-write: a bag without its footer), so both close their outputs the same way."""
 from __future__ import annotations
 
 import importlib
@@ -27,7 +28,13 @@ def _import_main(module: str):
     return main, bool(came)
 
 
+def _as_ctrl_c(signum, frame):
+    raise KeyboardInterrupt
+
+
 def _run(module: str, prog: str, interrupted: int) -> int:
+    if interrupted:
+        signal.signal(signal.SIGTERM, _as_ctrl_c)
     main, stopped = _import_main(module)
     try:
         if not stopped:

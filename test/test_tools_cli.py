@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -278,3 +279,59 @@ def test_ctrl_c_while_the_node_loads_its_kernels_is_quiet():
     out = "".join(seen) + rest
     assert "preparing the estimator's kernels" in out, out
     assert proc.returncode == 0 and "Failed" not in out and "Traceback" not in out, out
+
+
+def _wait_for(condition, proc, timeout=60.0):
+    """Poll ``condition`` until it holds, the process ends or the deadline passes."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and proc.poll() is None:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_sigterm_closes_the_tools_outputs_as_ctrl_c_does(tmp_path):
+    """SIGTERM (what a process manager or `timeout` sends) mid-write: the tools ended by the
+    signal's default, rc -15 and a bag without its footer or metadata.yaml that replay called
+    damaged, and a waiting --play gave rclpy's ExternalShutdownException traceback. Now both end
+    as on Ctrl-C: 130, one line, and the frames written so far readable."""
+    bin_dir = os.path.dirname(sys.executable)
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOCALHOST_ONLY="1")
+    bag = tmp_path / "bag"
+    proc = subprocess.Popen([os.path.join(bin_dir, "fcop_make_bag"), str(bag), "--frames", "400",
+                             "--width", "160", "--height", "120", "--compression", "none"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        # Some frames on disk: the mcap file past its header.
+        started = _wait_for(lambda: any(p.stat().st_size > 200_000
+                                        for p in bag.glob("*.mcap")), proc)
+        assert started, proc.communicate(timeout=60)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert err.strip().startswith("fcop_make_bag: interrupted") and "Traceback" not in err, err
+    assert (bag / "metadata.yaml").exists()
+    src = BagSource(bag)
+    try:
+        assert 0 < sum(src.counts.values()) < 1200 and not src.damaged  # 3 images a frame
+    finally:
+        src.close()
+
+    proc = subprocess.Popen([os.path.join(bin_dir, "fcop_replay"), str(bag), "--play",
+                             "--depth-topic", "/camera/depth", "--nocs-topic", "/camera/nocs",
+                             "--mask-topic", "/camera/mask", "--wait-subscribers", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        line = proc.stderr.readline()  # "waiting ... for a subscriber": rclpy is spinning
+        assert "wait" in line, line
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, line + err
+    assert "interrupted" in err and "Traceback" not in err, line + err

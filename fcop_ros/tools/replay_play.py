@@ -35,11 +35,13 @@ def _wait_for_subscribers(node, pubs: dict, seconds: float, stop, say) -> tuple:
 
     if not missing():
         return ()
-    say(f"waiting up to {seconds:g} s for a subscriber on each of {', '.join(missing())}")
     start = time.monotonic()
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     try:
+        # Said once the executor is whole: a signal that came while rclpy built it left a
+        # half-made executor whose __del__ printed a traceback.
+        say(f"waiting up to {seconds:g} s for a subscriber on each of {', '.join(missing())}")
         spin_until(executor, lambda: stop.is_set() or not missing(), seconds)
     finally:
         executor.remove_node(node)
@@ -93,6 +95,7 @@ def play(
     does not lose the first frames; ``say`` (a function of one line) is told what it waits for
     and how the wait ended (``PlayResult.no_subscriber``: the topics still without one)."""
     import rclpy
+    from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Image
@@ -169,6 +172,8 @@ def play(
             result.damaged = source.damaged
             if not loop or start_wall is None:
                 break
+    except ExternalShutdownException:  # SIGTERM or Ctrl-C: rclpy shut the context down
+        raise KeyboardInterrupt from None
     finally:
         node.destroy_node()
         source.close()
