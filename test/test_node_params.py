@@ -53,6 +53,35 @@ def test_bad_parameter_at_start_up_is_one_line_and_exit_2(arg, expected):
     assert all(e in lines[0] for e in expected), lines[0]
 
 
+@pytest.mark.parametrize("arg, expected", [
+    # rcl leaves these unset: rclpy raised ParameterUninitializedException, a traceback.
+    ("focal_max:=[]", "parameter focal_max has no value: a number in"),
+    ("camera_name:=#x", "parameter camera_name has no value: a string"),
+    # rcl refuses these in rclpy.init: its RCLError was re-raised, a traceback.
+    ("camera_name:=", "Couldn't parse parameter override rule: '-p camera_name:='"),
+    ("focal_max:=[1, a]", "Sequence should be of same type"),
+])
+def test_value_rcl_cannot_take_at_start_up_ends_in_a_line_and_exit_2(arg, expected):
+    """A hostile user's trial: values rcl leaves unset or refuses ended in tracebacks (exit 1).
+    rcl logs a line of its own before refusing; the node's line is the last."""
+    exe = os.path.join(BIN, "fcop_node")
+    res = subprocess.run([exe, "--ros-args", "-p", arg], capture_output=True,
+                         text=True, timeout=60)
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    assert lines[-1].startswith("fcop_node: ") and expected in lines[-1], res.stderr
+
+
+def test_multi_document_params_file_passes_the_node_check(tmp_path):
+    """rcl reads every document of a params file, a later value winning; the node's own
+    check refused such a file as not YAML."""
+    path = tmp_path / "two.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    window_frames: 5\n---\n"
+                    "/**:\n  ros__parameters:\n    window_frames: 7\n")
+    from fcop_ros.ros.command_line import params_file_problem
+    assert params_file_problem(["fcop_node", "--ros-args", "--params-file", str(path)]) == ""
+
+
 def test_unreadable_params_file_at_start_up_is_one_line_and_exit_2(tmp_path):
     exe = os.path.join(BIN, "fcop_node")
     missing = str(tmp_path / "nonexistent.yaml")

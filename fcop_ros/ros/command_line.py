@@ -57,12 +57,12 @@ def params_file_problem(args) -> str:
             path = args[i + 1]
             try:
                 with open(path, encoding="utf-8") as f:
-                    doc = yaml.safe_load(f)
+                    docs = list(yaml.safe_load_all(f))  # rcl reads every document
             except OSError as exc:
                 return f"cannot read params file {path}: {exc.strerror or exc}"
             except yaml.YAMLError as exc:
                 return f"params file {path} is not YAML: {' '.join(str(exc).split())}"
-            if not _names_parameters(doc):
+            if not any(_names_parameters(doc) for doc in docs):
                 return (f"params file {path} names no parameters: it wants "
                         "'<node name or /**>: ros__parameters: {name: value}' "
                         "(see config/fcop.yaml)")
@@ -70,5 +70,7 @@ def params_file_problem(args) -> str:
 
 
 def rcl_params_error(exc) -> str:
-    """rcl's words for a params file it cannot read, without the source locations it appends."""
-    return re.sub(r", at [^,]+:[0-9]+", "", str(exc))
+    """rcl's words for ROS arguments it cannot parse (a params file, a -p value, a remap), without
+    the source locations it appends."""
+    text = re.sub(r", at [^,]+:[0-9]+", "", str(exc))
+    return text.removeprefix("failed to initialize rcl: ")

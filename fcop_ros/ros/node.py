@@ -306,12 +306,14 @@ class FcopNode(Node):
                 # focal_min:=300 means 300.0
                 overrides[name] = Parameter(name, value=float(given.value))
             try:
-                self.declare_parameter(name, spec.default, descriptor(name))
+                declared = self.declare_parameter(name, spec.default, descriptor(name))
             except ParameterException:
                 value = overrides[name].value if name in overrides else "?"
                 raise ParameterError(
                     f"parameter {name}={value!r} is not allowed: {allowed(name, value)}"
                 ) from None
+            if declared.type_ == Parameter.Type.NOT_SET:  # rcl's reading of '[]' or a blank
+                raise ParameterError(f"parameter {name} has no value: {allowed(name)}")
         self.p = {name: self.get_parameter(name).value for name in PARAMETERS}
         for name, value in self.p.items():
             check_words(name, value)
@@ -922,9 +924,7 @@ def main(args=None) -> int:
         return 2
     try:
         rclpy.init(args=args)
-    except RCLError as exc:  # rcl parses --params-file here: a missing or broken file
-        if "params file" not in str(exc):
-            raise
+    except RCLError as exc:  # rcl parses the ROS arguments here: -p, --params-file, -r, ...
         print(f"fcop_node: {rcl_params_error(exc)}", file=sys.stderr)
         return 2
     node = None
