@@ -64,3 +64,21 @@ def test_values_typed_as_rcl_types_them():
 def test_what_rcl_refuses_is_refused(text, problem):
     with pytest.raises(rcl_yaml.RclYamlError, match=re.escape(problem)):
         rcl_yaml.load(text)
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("[]", "has no value"),          # rcl leaves the parameter unset
+    ("|\n", "has no value"),         # an empty block scalar: rcl's "No value"
+    ("[&a 1, *a]", "rcl does not take aliases"),
+])
+def test_what_rcl_leaves_unset_or_refuses_has_no_value(text, problem):
+    with pytest.raises(rcl_yaml.RclYamlError, match=re.escape(problem)):
+        rcl_yaml.load(text)
+
+
+def test_params_file_entries_in_the_order_rcl_applies_them():
+    text = ("a:\n  ros__parameters:\n    x: 1\n    n: {y: 2.0, z: [1, 2]}\n"
+            "/**:\n  ros__parameters:\n    x: 'text'\n---\na:\n  ros__parameters:\n    x: 3\n")
+    assert rcl_yaml.parameter_entries(text) == [
+        ("a", "x", 1), ("a", "n.y", 2.0), ("a", "n.z", [1, 2]), ("/**", "x", "text"),
+        ("a", "x", 3)]

@@ -70,7 +70,7 @@ INT_1000 = "is not allowed: an integer in [1, 1000]"
     ("window_frames:=2.5", f"parameter window_frames=2.5 from -p {INT_1000}"),
     # Text to rcl, so to the node (Python's int() took it: the replay ran what the node refuses).
     ("window_frames:=1_000", f"parameter window_frames='1_000' from -p {INT_1000}"),
-    ("camera_name:=1", "quote text: -p camera_name:=\"'1'\""),
+    ("camera_name:=1", "so quote text (-p camera_name:=\"'text'\""),
     ("focal_min:=30000.0",
      "parameter focal_min=30000.0 from -p is not allowed: it must be below focal_max=20000.0"),
     # The value moved is blamed, not the default it collides with (before: focal_min=50.0).
@@ -135,6 +135,25 @@ def test_misspelt_parameter_name_is_refused_with_the_known_names(bag, tmp_path, 
             "/**:\n  ros__parameters:\n    focal_min: 50.0\n    focal_max: 40.0\n",
             "parameter focal_max=40.0 from --params-file",
         ),
+        # What rcl refuses (a hostile user's trial: the replay took them).
+        (
+            "/**:\n  ros__parameters:\n    focal_min: &f 100.0\n    focal_max: *f\n",
+            "an alias (*name) at line 4: rcl does not take aliases",
+        ),
+        (
+            "fcop_node:\n  ros__parameters:\n    seed: 1\n  other: 2\n",
+            "'other' stands beside ros__parameters",
+        ),
+        (
+            "fcop_node:\n  ros_parameters:\n    seed: 1\n",
+            "(did you mean ros__parameters for 'ros_parameters'?)",
+        ),
+        # rcl applies sections in file order, a later one winning: here the wildcard's 10.
+        (
+            "fcop_node:\n  ros__parameters:\n    focal_max: 100.0\n"
+            "/**:\n  ros__parameters:\n    focal_max: 10.0\n",
+            "parameter focal_max=10.0 from --params-file",
+        ),
     ],
 )
 def test_invalid_params_file_is_refused(bag, tmp_path, capsys, content, expected):
@@ -146,18 +165,21 @@ def test_invalid_params_file_is_refused(bag, tmp_path, capsys, content, expected
 
 
 def test_params_file_sections_for_any_namespace(tmp_path):
-    """Wildcard sections apply first, the node's own (any namespace, nested or not) after them,
-    then -p; sections of other nodes are ignored."""
+    """Sections apply as rcl applies them, in file order with a later value winning (the
+    node's own, in any namespace, nested or not, and wildcards alike), then -p; sections of
+    other nodes are ignored; documents and repeated sections add up."""
     pf = tmp_path / "p.yaml"
     pf.write_text("other:\n  ros__parameters:\n    window_frames: 999\n"
-                  "/camera/fcop_node:\n  ros__parameters:\n    window_frames: 7\n    seed: 5\n"
                   "/**:\n  ros__parameters:\n    window_frames: 9\n    min_window_votes: 40\n"
                   "    use_sim_time: false\n"
+                  "/camera/fcop_node:\n  ros__parameters:\n    window_frames: 7\n    seed: 5\n"
                   "robot:\n  arm:\n    fcop_node:\n      ros__parameters:\n"
-                  "        min_frames: 3\n")
+                  "        min_frames: 3\n"
+                  "---\nfcop_node:\n  ros__parameters:\n    focal_min: 40.0\n"
+                  "fcop_node:\n  ros__parameters:\n    focal_max: 4500.0\n")
     assert replay_params.load_params_file(pf) == {
         "window_frames": 7, "min_window_votes": 40, "use_sim_time": False, "seed": 5,
-        "min_frames": 3}
+        "min_frames": 3, "focal_min": 40.0, "focal_max": 4500.0}
     params = replay_params.node_parameters(
         str(pf), ["seed:=11", "focal_min:=60", "noise_bound_mode:=absolute", "noise_bound:=5"])
     assert params["seed"] == 11 and params["window_frames"] == 7

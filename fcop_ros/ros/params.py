@@ -228,9 +228,8 @@ def allowed(name: str, value=None) -> str:
         return f"{kind} in [{spec.range[0]}, {spec.range[1]}]"
     words = f"a string ({spec.text_rule})"
     if value is not None and not isinstance(value, str):
-        text = "..." if isinstance(value, bool) else value
-        words += (f"; ROS reads a bare number or yes/no/true/false as that type, so quote "
-                  f"text: -p {name}:=\"'{text}'\"")
+        words += ("; ROS reads a bare number or yes/no/true/false as that type, so quote text "
+                  f"(-p {name}:=\"'text'\", or 'text' in a params file)")
     return words
 
 

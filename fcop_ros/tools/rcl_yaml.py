@@ -4,6 +4,7 @@ text to rcl, '010' is 8, '08' is 8.0 and 'yes' is true, whatever YAML 1.1 or Pyt
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 
@@ -83,19 +84,28 @@ def scalar(text: str, quoted: bool = False, str_tag: bool = False):
 
 
 class _Loader(yaml.BaseLoader):
-    """Composes nodes without YAML 1.1's implicit types; untagged nodes get _PLAIN."""
+    """Composes nodes without YAML 1.1's implicit types (untagged nodes get _PLAIN) and
+    refuses aliases, as rcl does."""
 
     def resolve(self, kind, value, implicit):
         return _PLAIN
 
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            line = self.peek_event().start_mark.line + 1
+            raise RclYamlError(f"an alias (*name) at line {line}: rcl does not take aliases")
+        return super().compose_node(parent, index)
+
 
 def _value(node, where: str):
     if isinstance(node, yaml.ScalarNode):
-        if node.style is None and node.value == "":
+        if node.style not in ("'", '"') and node.value == "":
             raise RclYamlError(f"{where} has no value (line {node.start_mark.line + 1})")
         return scalar(node.value, quoted=node.style in ("'", '"'), str_tag=node.tag == _STR_TAG)
     if isinstance(node, yaml.SequenceNode):
         items = [_value(item, where) for item in node.value]
+        if not items:  # rcl leaves the parameter unset
+            raise RclYamlError(f"{where} has no value (line {node.start_mark.line + 1})")
         if any(not isinstance(item, (bool, int, float, str)) for item in items):
             raise RclYamlError(f"{where}: a sequence may hold only values, not sequences "
                                f"or mappings (line {node.start_mark.line + 1})")
@@ -107,6 +117,53 @@ def _value(node, where: str):
         key.value: _value(item, f"{where}/{key.value}" if where else key.value)
         for key, item in node.value
     }
+
+
+def parameter_entries(text: str) -> list:
+    """(section, parameter name, value) of every parameter of a ROS 2 params file, in the order
+    rcl applies them: file order, document after document, a later value winning (sections
+    of the same node are merged, not replaced). Nested mappings under ros__parameters give
+    dotted names. yaml.YAMLError if it is not YAML, RclYamlError for a structure rcl refuses
+    or a value it would not take."""
+    out = []
+    for root in yaml.compose_all(text, Loader=_Loader):
+        if root is None:
+            continue
+        if not isinstance(root, yaml.MappingNode):
+            raise RclYamlError("it is not a ROS 2 parameter file (expected '/**:' or a node "
+                               "name, with 'ros__parameters:' under it)")
+        _sections(root, "", out)
+    return out
+
+
+def _sections(node, prefix: str, out: list) -> None:
+    for key, body in node.value:
+        full = f"{prefix}{key.value}"
+        if not isinstance(body, yaml.MappingNode):
+            close = [k for k in full.split("/") if k != "ros__parameters"
+                     and difflib.get_close_matches(k, ["ros__parameters"], cutoff=0.8)]
+            hint = f" (did you mean ros__parameters for {close[0]!r}?)" if close else ""
+            raise RclYamlError(f"section {full!r} is not a mapping{hint}")
+        keys = [k.value for k, _ in body.value]
+        if "ros__parameters" not in keys:
+            _sections(body, full.rstrip("/") + "/", out)
+            continue
+        for k, params in body.value:
+            if k.value != "ros__parameters":
+                raise RclYamlError(f"section {full!r}: {k.value!r} stands beside "
+                                   "ros__parameters, which rcl refuses")
+            if not isinstance(params, yaml.MappingNode):
+                raise RclYamlError(f"section {full!r}: ros__parameters is not a mapping")
+            _parameters(params, full, "", out)
+
+
+def _parameters(node, section: str, prefix: str, out: list) -> None:
+    for key, item in node.value:
+        name = f"{prefix}{key.value}"
+        if isinstance(item, yaml.MappingNode):
+            _parameters(item, section, f"{name}.", out)
+        else:
+            out.append((section, name, _value(item, name)))
 
 
 def load(text: str, where: str = ""):

@@ -18,21 +18,6 @@ NODE_NAME = "fcop_node"
 _ROS_PARAMETERS = ("use_sim_time", "start_type_description_service")
 
 
-def _sections(doc, prefix=""):
-    """(key, ros__parameters) of every node section of a parameter file, nested namespaces
-    joined."""
-    for key, body in doc.items():
-        if not isinstance(body, dict):
-            raise ReplayError(f"section {prefix + str(key)!r} is not a mapping")
-        full = f"{prefix}{key}"
-        if "ros__parameters" in body:
-            if not isinstance(body["ros__parameters"], dict):
-                raise ReplayError(f"section {full!r}: ros__parameters is not a mapping")
-            yield full, body["ros__parameters"]
-        else:
-            yield from _sections(body, full.rstrip("/") + "/")
-
-
 def _applies(key: str, node_name: str) -> bool:
     """Does a parameter-file section apply to the replayed node? Its last name must be the node's
     or a wildcard: the namespace part is ignored, because the replayed node stands in for the
@@ -41,25 +26,15 @@ def _applies(key: str, node_name: str) -> bool:
     return last in (node_name, "*", "**")
 
 
-def _flatten(params: dict, prefix="") -> dict:
-    out = {}
-    for k, v in params.items():
-        if isinstance(v, dict):
-            out.update(_flatten(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
-
-
 def load_params_file(path, node_name: str = NODE_NAME) -> dict:
     """{name: value} of every section of a ROS 2 parameter file that applies to ``node_name``
-    (see :func:`_applies`); wildcard sections first so the node's own values win."""
+    (see :func:`_applies`), in the order rcl applies them: file order, a later value winning."""
     try:
         text = Path(path).read_text()
     except OSError as exc:
         raise ReplayError(f"cannot read --params-file {path}: {exc.strerror or exc}") from None
     try:
-        doc = rcl_yaml.load(text)
+        entries = rcl_yaml.parameter_entries(text)
     except yaml.YAMLError as exc:
         where = getattr(exc, "problem_mark", None)
         at = f" (line {where.line + 1})" if where is not None else ""
@@ -68,24 +43,18 @@ def load_params_file(path, node_name: str = NODE_NAME) -> dict:
         ) from None
     except rcl_yaml.RclYamlError as exc:
         raise ReplayError(f"--params-file {path}: {exc}") from None
-    if not isinstance(doc, dict):
+    if not entries:
         raise ReplayError(
             f"--params-file {path} is not a ROS 2 parameter file "
             f"(expected '/**:' or '{node_name}:' with 'ros__parameters:' under it)"
         )
-    try:
-        sections = [(k, v) for k, v in _sections(doc) if _applies(k, node_name)]
-    except ReplayError as exc:
-        raise ReplayError(f"--params-file {path}: {exc}") from None
-    if not sections:
+    values = {name: value for section, name, value in entries if _applies(section, node_name)}
+    if not values:
+        sections = dict.fromkeys(section for section, _, _ in entries)
         raise ReplayError(
             f"--params-file {path} has no section for {node_name} (it has: "
-            f"{', '.join(str(k) for k in doc) or 'nothing'}); key it '/**:' or '{node_name}:'"
+            f"{', '.join(sections)}); key it '/**:' or '{node_name}:'"
         )
-    sections.sort(key=lambda kv: 0 if "*" in kv[0] else 1)
-    values = {}
-    for _, params in sections:
-        values.update(_flatten(params))
     return values
 
 
@@ -158,9 +127,11 @@ def check_parameters(values: dict, where: dict) -> dict:
 
     full = defaults()
     full.update({k: v for k, v in out.items() if k in PARAMETERS})
-    # Blame the value moved from its default (a params file usually gives them all).
+    # Blame the value moved from its default (a params file usually gives them all), and of two
+    # moved, the one given by -p (the user's latest word).
     moved = {k for k, v in out.items() if k in PARAMETERS and v != PARAMETERS[k].default}
-    name, rule = combination_conflict(full, changed=moved)
+    name, rule = combination_conflict(
+        full, changed={k for k in moved if where.get(k) == "-p"} or moved)
     if name:
         src = where.get(name, "the node's defaults")
         raise ReplayError(f"parameter {name}={full[name]!r} from {src} is not allowed: {rule}")
