@@ -11,6 +11,8 @@ import importlib
 import signal
 import sys
 
+from .tools.cli import from_ctrl_c
+
 _HELD = {signal.SIGINT, signal.SIGTERM}
 
 
@@ -32,19 +34,6 @@ def _as_ctrl_c(signum, frame):
     raise KeyboardInterrupt
 
 
-def _from_ctrl_c(exc: BaseException) -> bool:
-    """Whether ``exc`` is, or was raised while handling, a KeyboardInterrupt: Ctrl-C inside a
-    tool's lazy import can surface as another error (a dataclass being built reraises it as
-    RuntimeError)."""
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, KeyboardInterrupt):
-            return True
-        seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
-    return False
-
-
 def _run(module: str, prog: str, interrupted: int) -> int:
     if interrupted:
         signal.signal(signal.SIGTERM, _as_ctrl_c)
@@ -55,7 +44,7 @@ def _run(module: str, prog: str, interrupted: int) -> int:
     except KeyboardInterrupt:  # one that the tool's own handlers did not catch
         pass
     except Exception as exc:
-        if not _from_ctrl_c(exc):
+        if not from_ctrl_c(exc):
             raise
     if interrupted:
         print(f"{prog}: interrupted", file=sys.stderr)

@@ -183,3 +183,28 @@ def test_interrupted_keeps_the_rows_before_and_exits_130(dataset, tmp_path, caps
     assert ne.main([str(root), "--intrinsics", "real275", "--csv", str(out)]) == 130
     assert len(list(csv.DictReader(open(out)))) == 2
     assert "interrupted" in capsys.readouterr().err
+
+
+def test_ctrl_c_inside_a_compiled_kernel_is_an_interruption(dataset, tmp_path, capsys,
+                                                            monkeypatch):
+    """numba wraps a KeyboardInterrupt raised inside a kernel in a SystemError; that is Ctrl-C
+    too (130, the rows before kept), while any other SystemError still propagates."""
+    root, _ = dataset
+
+    def interrupted(*args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise SystemError("<built-in function ...> returned a result with an exception set")
+
+    monkeypatch.setattr(ne, "load_frame", interrupted)
+    out = tmp_path / "eval.csv"
+    assert ne.main([str(root), "--intrinsics", "real275", "--csv", str(out)]) == 130
+    assert "interrupted" in capsys.readouterr().err
+
+    def broken(*args):
+        raise SystemError("a real bug")
+
+    monkeypatch.setattr(ne, "load_frame", broken)
+    with pytest.raises(SystemError, match="a real bug"):
+        ne.main([str(root), "--intrinsics", "real275", "--csv", str(out)])

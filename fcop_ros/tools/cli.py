@@ -1,4 +1,5 @@
-"""What the command-line tools share: a help format that shows every default."""
+"""What the command-line tools share: a help format that shows every default, and how to tell
+an error that Ctrl-C caused."""
 from __future__ import annotations
 
 import argparse
@@ -15,3 +16,16 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescript
         if action.default is None or action.required or flag or empty:
             return action.help
         return super()._get_help_string(action)
+
+
+def from_ctrl_c(exc: BaseException) -> bool:
+    """Whether ``exc`` is, or was raised while handling, a KeyboardInterrupt: Ctrl-C can
+    surface as another error (numba's SystemError around a compiled kernel, a RuntimeError
+    from a dataclass interrupted while a lazy import built it)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False

@@ -23,6 +23,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .cli import from_ctrl_c
+
 INTRINSICS = {
     "real275": (591.0125, 590.16775, 322.525, 244.11084),
     "camera25": (577.5, 577.5, 319.5, 239.5),
@@ -244,9 +246,7 @@ def main(argv=None) -> int:
         print(f"fcop_eval_nocs: {exc}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, SystemError) as exc:
-        # Ctrl-C inside a compiled kernel comes out as numba's SystemError around it.
-        if not isinstance(exc, KeyboardInterrupt) and not isinstance(exc.__context__,
-                                                                      KeyboardInterrupt):
+        if not from_ctrl_c(exc):  # Ctrl-C inside a compiled kernel: numba's SystemError
             raise
         print(f"fcop_eval_nocs: interrupted; {args.csv} holds the frames before",
               file=sys.stderr)
