@@ -81,6 +81,8 @@ INT_1000 = "is not allowed: an integer in [1, 1000]"
     ("publish_poses:=maybe",
      "parameter publish_poses='maybe' from -p is not allowed: true or false"),
     ("window_frames=3", "-p expects NAME:=VALUE, got 'window_frames=3'"),
+    ("window_frames:=", "-p window_frames:= has no value"),
+    ("window_frames:=#", "-p window_frames:=# has no value"),
     # What a descriptor cannot say: before, this replay ran until 'fcop_node did not start'.
     ("camera_name:=a b", "parameter camera_name='a b' from -p is not allowed: a string ("),
     # The node's own refusal came after --out was cleared (a hostile user's earlier outputs).
