@@ -236,6 +236,14 @@ def run_sequence(preset, seed, n, variant, zoom=1.0):
     return rows
 
 
+def zoom_sequence(preset, seed, variant, factor):
+    """The rows of a 40-frame sequence from its zoom (x ``factor`` at frame 20) on, and the
+    frames after the zoom until the window is within 5% of the new focal for good."""
+    rows = run_sequence(preset, seed, 40, variant, factor)[20:]
+    bad = [i for i, r in enumerate(rows) if r[3] is None or abs(np.log(r[3] / r[0])) > 0.05]
+    return rows, (bad[-1] + 1 if bad else 0)
+
+
 def window(presets, sequences, first_seed, variant, zoom_sequences):
     print(
         "\n| preset | sequences | single frames: median abs error % | window: median abs error % "
@@ -265,14 +273,8 @@ def window(presets, sequences, first_seed, variant, zoom_sequences):
                     win[-1].append(abs(np.log(wf / t)))
                     cover.append(abs(np.log(wf / t)) <= 2 * ws)
         for q in range(zoom_sequences):
-            for zoom in (1.25, 0.8):
-                rows = run_sequence(preset, first_seed + 100 + q, 40, variant, zoom)[20:]
-                bad = [
-                    i
-                    for i, r in enumerate(rows)
-                    if r[3] is None or abs(np.log(r[3] / r[0])) > 0.05
-                ]
-                delays.append(bad[-1] + 1 if bad else 0)
+            for factor in (1.25, 0.8):
+                delays.append(zoom_sequence(preset, first_seed + 100 + q, variant, factor)[1])
 
         def ratio(pick):
             return (np.median(np.concatenate([win[i] for i in pick]))
@@ -305,10 +307,7 @@ def zoom(presets, zoom_sequences, first_seed, variant):
         within, prompt, misses = 0, 0, []
         for q in range(zoom_sequences):
             for factor in (1.25, 0.8):
-                rows = run_sequence(preset, first_seed + 100 + q, 40, variant, factor)[20:]
-                bad = [i for i, r in enumerate(rows)
-                       if r[3] is None or abs(np.log(r[3] / r[0])) > 0.05]
-                delay = bad[-1] + 1 if bad else 0
+                rows, delay = zoom_sequence(preset, first_seed + 100 + q, variant, factor)
                 restart = next((i for i, r in enumerate(rows) if r[5]), None)
                 within += delay <= 15
                 prompt += restart is not None and restart <= 3
