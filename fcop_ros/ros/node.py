@@ -17,7 +17,7 @@ import os
 import sys
 import threading
 import time
-from collections import Counter, OrderedDict, deque
+from collections import Counter, deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,12 +48,12 @@ from msg_adapters import (
     to_fcop_convention,
 )
 
-from ..core import FocalWindow, compiled, estimate_focal, estimate_poses
+from ..core import compiled, estimate_focal, estimate_poses
 from .allocator import limit_allocator_arenas
+from .answers import DepthAnswers
 from .calibration import default_calibration_path, write_calibration
 from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
-from .gate import held_back
 from .intrinsics import IntrinsicsRefused, camera_info_with, intrinsics
 from .params import (
     ESTIMATOR_PARAMETERS,
@@ -71,6 +71,7 @@ from .params import (
 from .qos import input_qos, latched_qos, output_qos, refused_override, unknown_override_hint
 from .sync import StampSynchronizer
 from .throttle import LogThrottle
+from .tracker import FocalTracker
 from .worker import LatestSlotWorker
 
 INPUTS = ("depth", "nocs", "mask")
@@ -109,25 +110,6 @@ class NodeCounts:
     skipped: int
     camera_info_published: int
     rejected: dict
-
-
-@dataclasses.dataclass
-class _Publishable:
-    """The estimate depth images get their CameraInfo from: the window's, when within
-    max_uncertainty."""
-
-    focal: float
-    std_rel: float
-    width: int
-    height: int
-    window: object  # the WindowEstimate
-
-
-def _light(est):
-    """The frame estimate without its pixel data: what the window needs to re-evaluate it later."""
-    names = {f.name for f in dataclasses.fields(est)}
-    heavy = {"instances": [], "inlier_masks": None, "votes": np.zeros(0), "objects": []}
-    return dataclasses.replace(est, **{k: v for k, v in heavy.items() if k in names})
 
 
 def _clipped(reason: str) -> str:
@@ -181,23 +163,17 @@ class FcopNode(Node):
         )
         self._warming_up = True  # until the worker has its kernels (see _warm_up_kernels)
         self.warm_up_seconds = 0.0  # what preparing them took (replay's throughput leaves it out)
-        self._size = None  # (width, height) of the frames in the window
-        self._estimate: _Publishable | None = None
-        # The window's frames since its last restart, light, to re-evaluate later: as many as
-        # the largest window_frames set so far, so that a window shrunk and grown again gets
-        # its frames back.
-        self._history: deque = deque()
-        self._history_cap = 0
         self._last_objects: list = []
-        self._answered: OrderedDict = OrderedDict()  # depth stamps that got their CameraInfo
-        self._unanswered: OrderedDict = OrderedDict()  # depth stamps that came before an estimate
-        self._last_info_stamp = float("-inf")  # stamps may be negative
+        self._answers = DepthAnswers()  # under self._pub_lock
         self._cam_in: CameraInfo | None = None
         self._warned_distortion = False
         self._rng = np.random.default_rng(None if self.p["seed"] < 0 else int(self.p["seed"]))
         self.sync = self._new_sync()
         self.estimator_options = estimator_options(self.p)
-        self._build_window(keep=False)
+        # The window, the image size it holds and the publish gate; under self._lock.
+        self.tracker = FocalTracker(
+            window_options(self.p), self.p["max_uncertainty"],
+            (self.p["focal_min"], self.p["focal_max"]))
         try:
             self._create_topics()
         except ParameterError:
@@ -344,7 +320,7 @@ class FcopNode(Node):
                     new[prm.name] = prm.value
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        problem = check_combination(new, self._size, {prm.name for prm in params})
+        problem = check_combination(new, self.tracker.size, {prm.name for prm in params})
         if problem:
             return SetParametersResult(successful=False, reason=problem)
         changed = {k for k in new if new[k] != self.p.get(k)}
@@ -357,11 +333,9 @@ class FcopNode(Node):
                 )
             if changed & ESTIMATOR_PARAMETERS:
                 self.estimator_options = estimator_options(new)
-            if changed & WINDOW_PARAMETERS:
-                self._build_window(keep=True)
-            elif changed & {"max_uncertainty", "focal_min", "focal_max"}:
-                # The publish gate again: the window's focal may now be held back (or freed).
-                self._update_estimate_locked(self.window.current)
+            if changed & (WINDOW_PARAMETERS | {"max_uncertainty", "focal_min", "focal_max"}):
+                self.tracker.configure(window_options(new), new["max_uncertainty"],
+                                       (new["focal_min"], new["focal_max"]))
         if "diagnostics_period" in changed:
             self.destroy_timer(self._diag_timer)
             self._diag_timer = self.create_timer(
@@ -373,42 +347,13 @@ class FcopNode(Node):
         slop = self.p["sync_slop"] if self.p["sync_mode"] == "approximate" else 0.0
         return StampSynchronizer(len(INPUTS), self.p["queue_size"], slop)
 
-    def _build_window(self, keep: bool) -> None:
-        """A window with the current settings; with ``keep``, the old window's frames re-evaluated
-        in it."""
-        frames = list(self._history) if keep else []
-        self.window = FocalWindow(window_options(self.p))
-        self._history = deque()
-        self._history_cap = max(self._history_cap, self.p["window_frames"])
-        for est, t in frames:
-            self._add_to_window(est, t)
-        self._update_estimate_locked(self.window.current)
-
-    def _add_to_window(self, est, t: float):
-        win = self.window.add(est, t)
-        self._history.append((est, t))
-        keep = len(self.window) if win.changed else max(len(self.window), self._history_cap)
-        while len(self._history) > keep:
-            self._history.popleft()
-        return win
-
-    def _update_estimate_locked(self, win) -> None:
-        """The publish gate (see .gate): the window's focal goes out only within max_uncertainty
-        and focal_range, which bounds also a focal the window holds from frames estimated
-        before the range was changed at run time."""
-        p = self.p
-        if self._size is None or held_back(win, p["max_uncertainty"],
-                                           (p["focal_min"], p["focal_max"])):
-            self._estimate = None
-        else:
-            self._estimate = _Publishable(
-                float(win.focal), float(win.std_rel), self._size[0], self._size[1], win
-            )
+    @property
+    def window(self):
+        """The FocalWindow (read it under the node's lock, or through window_estimate)."""
+        return self.tracker.window
 
     def _reset_locked(self) -> None:
-        self.window.reset()
-        self._history.clear()
-        self._estimate = None
+        self.tracker.reset()
         self._newest_refusal = ""
         self.worker.clear()
 
@@ -472,7 +417,7 @@ class FcopNode(Node):
             )
         if jumped:
             with self._pub_lock:
-                self._forget_answers_locked()
+                self._answers.forget()
         for stamp_set, msgs in sets:
             self._check_frame_ids(msgs)
         for i, s, m in accepted:
@@ -518,41 +463,25 @@ class FcopNode(Node):
     def _answer_depth(self, stamp: int, msg: Image) -> None:
         """Publish the CameraInfo of one depth image with the current estimate, if there is one."""
         with self._pub_lock:
-            if stamp in self._answered:
+            if self._answers.answered(stamp):
                 return
-            est = self._estimate
+            est = self.tracker.publishable
             if est is None or (msg.width, msg.height) != (est.width, est.height):
-                self._remember(self._unanswered, stamp)
+                self._answers.unanswered(stamp)
                 return
             try:
                 info = self._camera_info(est.focal, est.width, est.height, msg.header)
             except IntrinsicsRefused:
-                self._remember(self._unanswered, stamp)
+                self._answers.unanswered(stamp)
                 return
             self._publish_info(stamp, info, est.window, self._last_objects)
-
-    def _forget_answers_locked(self) -> None:
-        """Under self._pub_lock. After a reset, stamps seen before may come again (a looped bag,
-        a camera clock that restarts): each gets its CameraInfo anew, and older stamps than the
-        last answered one are answered again."""
-        self._answered.clear()
-        self._unanswered.clear()
-        self._last_info_stamp = float("-inf")
-
-    @staticmethod
-    def _remember(od: OrderedDict, stamp: int, keep: int = 256) -> None:
-        od[stamp] = True
-        while len(od) > keep:
-            od.popitem(last=False)
 
     def _publish_info(self, stamp: int, info: CameraInfo, win, objects) -> None:
         """Under self._pub_lock."""
         self.pub_info.publish(info)
         self.pub_latest.publish(info)
         self.camera_info_published += 1
-        self._remember(self._answered, stamp)
-        self._unanswered.pop(stamp, None)
-        self._last_info_stamp = max(self._last_info_stamp, stamp)
+        self._answers.answer(stamp)
         self._latest = LatestEstimate(
             stamp,
             float(info.k[0]),
@@ -710,28 +639,15 @@ class FcopNode(Node):
                 "(rgb8 vs bgr8), or its axis convention (parameter nocs_convention)? "
                 "The focal length is unaffected; no pose is published for them",
             )
-        resized = stray = None
         with self._lock:
             if generation is not None and generation != self.worker.generation:
                 return False  # taken before a reset
-            if self._size != (w, h):
-                if est.focal is None and self._size is not None and len(self.window):
-                    # Another size without evidence: a drop; only evidence starts a new window
-                    # (an empty one, after ~/reset, takes the new size).
-                    stray = self._size
-                else:
-                    resized, self._size = self._size, (w, h)
-                    if resized is not None:
-                        self.window.reset()
-                        self._history.clear()
-            if stray is None:
-                win = self._add_to_window(_light(est), stamp * 1e-9)
-                self._update_estimate_locked(win)
-                ready = self._estimate
+            step = self.tracker.add(est, stamp * 1e-9, (w, h))
             self.last_estimate = est
             self._newest_refusal = "" if est.focal is not None else _clipped(est.reason)
             self._no_focal_frames += est.focal is None
             self._proc_times.append(time.perf_counter() - t0)
+        win, ready, resized, stray = step.window, step.ready, step.resized_from, step.kept_size
         if stray is not None:
             self._reject("other_size_no_evidence")
             self._throttle.warn(
@@ -759,7 +675,7 @@ class FcopNode(Node):
             return False
         # This frame's depth image arrived before there was an estimate: answer it now.
         with self._pub_lock:
-            if stamp in self._unanswered and stamp > self._last_info_stamp:
+            if self._answers.owed(stamp):
                 try:
                     self._publish_info(
                         stamp, self._camera_info(ready.focal, w, h, depth_msg.header), win, []
@@ -796,7 +712,7 @@ class FcopNode(Node):
             self.destroy_publisher(self.pub_latest)
             self.pub_latest = self._latched_publisher()
             # In the same step: a frame taken before the reset finds its stamp gone.
-            self._forget_answers_locked()
+            self._answers.forget()
         response.success = True
         response.message = "focal window, synchroniser, hand-off and latest_camera_info cleared"
         self._throttle.info("reset", "fcop_node: reset by service")
@@ -811,12 +727,11 @@ class FcopNode(Node):
 
     def _on_save_calibration(self, request, response):
         with self._lock:
-            est, win = self._estimate, self.window.current
+            est, why = self.tracker.publishable, self.tracker.held_back()
             p = dict(self.p)
         response.success = False
         if est is None:
-            response.message = held_back(win, p["max_uncertainty"],
-                                         (p["focal_min"], p["focal_max"])) or "no image yet"
+            response.message = why or "no image yet"
         if est is None:
             self.get_logger().warning(f"fcop_node: calibration not saved: {response.message}")
             return response
@@ -867,7 +782,7 @@ class FcopNode(Node):
             reading = DiagnosticsInput(
                 now=now,
                 window=self.window.current,
-                publishable=self._estimate is not None,
+                publishable=self.tracker.publishable is not None,
                 window_fill=f"{len(self.window)}/{self.p['window_frames']}",
                 max_uncertainty=self.p["max_uncertainty"],
                 focal_range=(self.p["focal_min"], self.p["focal_max"]),

@@ -1,0 +1,91 @@
+"""The node's focal bookkeeping without a node: the tracker (window, image size, kept frames,
+publish gate) and which depth stamps got their CameraInfo."""
+import numpy as np
+
+from fcop_ros import WindowOptions
+from fcop_ros.core.estimator import FocalEstimate
+from fcop_ros.ros.answers import DepthAnswers
+from fcop_ros.ros.tracker import FocalTracker
+
+
+def estimate(focal, std_rel=0.01, size=(640, 480), support=500):
+    return FocalEstimate(focal, (size[0] / 2, size[1] / 2), size, inlier_count=support,
+                         std_rel=std_rel, votes=np.ones(1000), instances=[object()])
+
+
+def empty(size=(640, 480)):
+    return FocalEstimate(None, (size[0] / 2, size[1] / 2), size, reason="nothing")
+
+
+def tracker(frames=5, max_uncertainty=0.05, focal_range=(100.0, 5000.0), **kw):
+    return FocalTracker(WindowOptions(max_frames=frames, **kw), max_uncertainty, focal_range)
+
+
+def test_publishable_carries_the_windows_focal_and_image_size_and_drops_pixel_data():
+    t = tracker()
+    assert t.publishable is None and "no frames yet" in t.held_back()
+    step = t.add(estimate(600.0), 0.0, (640, 480))
+    assert step.window is t.current and step.resized_from is None and step.kept_size is None
+    assert step.ready is t.publishable
+    assert (step.ready.focal, step.ready.width, step.ready.height) == (600.0, 640, 480)
+    kept = t._history[-1][0]  # what a later re-evaluation sees
+    assert kept.instances == [] and kept.votes.size == 0 and kept.focal == 600.0
+
+
+def test_another_size_starts_a_new_window_only_with_a_focal_of_its_own():
+    t = tracker()
+    for k in range(3):
+        t.add(estimate(600.0), k, (640, 480))
+    step = t.add(empty((320, 240)), 3, (320, 240))
+    assert step.kept_size == (640, 480) and step.window is None and len(t) == 3
+    assert t.publishable.width == 640  # the old size's focal still answers 640x480 images
+    step = t.add(estimate(300.0), 4, (320, 240))
+    assert step.resized_from == (640, 480) and len(t) == 1 and t.size == (320, 240)
+    assert abs(t.publishable.focal - 300.0) < 1e-9 and t.publishable.width == 320
+    t.reset()
+    assert t.publishable is None and len(t) == 0
+    # An empty window takes any size, with or without a focal.
+    assert t.add(empty((640, 480)), 5, (640, 480)).kept_size is None and t.size == (640, 480)
+
+
+def test_new_window_settings_re_evaluate_the_kept_frames():
+    """Five frames at 600 px, the window shrunk to 2 and grown to 5 again: it gets all five
+    back; settings that reach only the gate keep the window as it is."""
+    t = tracker(frames=5)
+    for k in range(5):
+        t.add(estimate(600.0 * (1 + 0.001 * k)), k, (640, 480))
+    window = t.window
+    t.configure(WindowOptions(max_frames=5), 0.05, (100.0, 5000.0))
+    assert t.window is window
+    t.configure(WindowOptions(max_frames=2), 0.05, (100.0, 5000.0))
+    assert len(t) == 2 and t.publishable is not None
+    t.configure(WindowOptions(max_frames=5), 0.05, (100.0, 5000.0))
+    assert len(t) == 5 and t.current.frames == 5
+    t.configure(WindowOptions(max_frames=5, min_frames=5), 0.05, (100.0, 5000.0))
+    assert t.publishable is not None  # five frames with a focal meet min_frames 5
+
+
+def test_the_gate_holds_back_an_uncertain_or_out_of_range_focal_and_frees_it_again():
+    t = tracker(max_uncertainty=0.005)
+    t.add(estimate(600.0, std_rel=0.01), 0.0, (640, 480))
+    assert t.publishable is None and "above max_uncertainty 0.005" in t.held_back()
+    t.configure(t.window.options, 0.05, (100.0, 5000.0))
+    assert abs(t.publishable.focal - 600.0) < 1e-9 and t.held_back() == ""
+    t.configure(t.window.options, 0.05, (700.0, 5000.0))
+    assert t.publishable is None and "outside focal_range [700, 5000]" in t.held_back()
+
+
+def test_each_depth_stamp_is_answered_once_and_a_late_answer_never_goes_back_in_time():
+    a = DepthAnswers(keep=3)
+    a.unanswered(10)
+    a.unanswered(20)
+    assert a.owed(10) and a.owed(20) and not a.answered(10)
+    a.answer(20)
+    assert a.answered(20) and not a.owed(20)
+    assert not a.owed(10)  # 20 went out already: 10's CameraInfo would go out of order
+    for s in (30, 40, 50):
+        a.answer(s)
+    assert not a.answered(20) and a.answered(50)  # only the last three are kept
+    a.forget()
+    a.unanswered(-5)  # a restarted clock: anything goes again
+    assert a.owed(-5) and not a.answered(50)
