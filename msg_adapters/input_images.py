@@ -104,6 +104,30 @@ def mask_from_image(msg: Image, role: str = "mask") -> np.ndarray:
     return image_to_array(msg, MASK_ENCODINGS, role)
 
 
+class ImageSizeMismatch(ImageFormatError):
+    """The three images of one frame differ in size."""
+
+
+def frame_from_images(depth_msg: Image, nocs_msg: Image, mask_msg: Image,
+                      depth_scale: float = 0.001, nocs_convention: str = "fcop"):
+    """One frame's (depth, nocs, mask) arrays from its three Images, the NOCS in this package's
+    convention (``nocs_convention`` 'nocs_dataset': the NOCS dataset's, converted). Raises
+    ImageFormatError for an image it cannot read, ImageSizeMismatch for sizes that differ."""
+    depth = depth_from_image(depth_msg, depth_scale)
+    nocs = nocs_from_image(nocs_msg)
+    mask = mask_from_image(mask_msg)
+    if not depth.shape == nocs.shape[:2] == mask.shape:
+        raise ImageSizeMismatch(
+            f"image sizes differ: depth {depth.shape[::-1]}, nocs {nocs.shape[1::-1]}, "
+            f"mask {mask.shape[::-1]}")
+    if nocs_convention == "nocs_dataset":
+        nocs = to_fcop_convention(nocs)
+    elif nocs_convention != "fcop":
+        raise ValueError(f"nocs_convention must be 'fcop' or 'nocs_dataset', not "
+                         f"{nocs_convention!r}")
+    return depth, nocs, mask
+
+
 def array_to_image(arr: np.ndarray, encoding: str, header=None) -> Image:
     """Build an Image from an array already in the encoding's dtype and channel count."""
     kind, ch = _LAYOUT[encoding]

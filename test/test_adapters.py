@@ -11,9 +11,9 @@ from std_msgs.msg import Header
 
 from fcop_ros.core.pose import ObjectPose
 from msg_adapters import (DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS, ImageFormatError,
-                          camera_info, depth_from_image, depth_to_image, image_to_array,
-                          mask_from_image, mask_to_image, marker_array, nocs_from_image,
-                          nocs_to_image, pose_array)
+                          ImageSizeMismatch, camera_info, depth_from_image, depth_to_image,
+                          frame_from_images, image_to_array, mask_from_image, mask_to_image,
+                          marker_array, nocs_from_image, nocs_to_image, pose_array)
 
 H, W = 7, 11
 
@@ -118,6 +118,27 @@ def test_clear_errors(rng):
         mask_to_image(np.array([[300]]), "mono8")
     with pytest.raises(ImageFormatError, match="unsupported"):
         depth_to_image(depth_sample(rng), "mono8")
+
+
+def test_a_frame_is_three_images_of_one_size_in_this_packages_nocs_convention(rng):
+    """The node's conversion of a matched set: depth in metres from 16UC1 millimetres, the NOCS
+    dataset's z flipped (pixels without a prediction stay zero), sizes checked."""
+    depth = np.round(depth_sample(rng) * 1000)
+    depth[0, 0] = 0
+    nocs = nocs_sample(rng).astype(np.float32)
+    mask = rng.integers(0, 4, (H, W)).astype(np.uint8)
+    msgs = (depth_to_image(depth / 1000, "16UC1"), nocs_to_image(nocs), mask_to_image(mask))
+    d, p, m = frame_from_images(*msgs, depth_scale=0.001, nocs_convention="nocs_dataset")
+    assert np.isnan(d[0, 0]) and np.allclose(d[1:], depth[1:] / 1000, atol=1e-6)
+    assert np.allclose(p[2:, :, 2], 1 - nocs[2:, :, 2]) and np.all(p[1, 1] == 0)
+    assert np.array_equal(m, mask)
+    assert np.array_equal(frame_from_images(*msgs)[1], nocs)  # 'fcop': as sent
+    small = mask_to_image(mask[:-1])
+    sizes = r"depth \(11, 7\), nocs \(11, 7\), mask \(11, 6\)"
+    with pytest.raises(ImageSizeMismatch, match=sizes):
+        frame_from_images(msgs[0], msgs[1], small)
+    with pytest.raises(ImageFormatError, match="nocs: unsupported encoding"):
+        frame_from_images(msgs[0], msgs[0], msgs[2])
 
 
 def test_built_image_survives_serialisation(rng):

@@ -38,14 +38,12 @@ from visualization_msgs.msg import MarkerArray
 
 from msg_adapters import (
     ImageFormatError,
-    depth_from_image,
+    ImageSizeMismatch,
+    frame_from_images,
     marker_array,
-    mask_from_image,
-    nocs_from_image,
     object_poses,
     pose_array,
     stamp_ns,
-    to_fcop_convention,
 )
 
 from ..core import compiled, estimate_focal, estimate_poses
@@ -603,23 +601,18 @@ class FcopNode(Node):
         depth_msg, nocs_msg, mask_msg = msgs
         p = self.p
         try:
-            depth = depth_from_image(depth_msg, p["depth_scale"])
-            nocs = nocs_from_image(nocs_msg)
-            mask = mask_from_image(mask_msg)
+            depth, nocs, mask = frame_from_images(
+                depth_msg, nocs_msg, mask_msg, p["depth_scale"], p["nocs_convention"])
+        except ImageSizeMismatch as exc:
+            return self._refuse_frame("size_mismatch", str(exc))
         except ImageFormatError as exc:
             return self._refuse_frame("bad_encoding", str(exc))
-        if not (depth.shape == nocs.shape[:2] == mask.shape):
-            return self._refuse_frame(
-                "size_mismatch", f"image sizes differ: depth {depth.shape[::-1]}, nocs "
-                f"{nocs.shape[1::-1]}, mask {mask.shape[::-1]}")
         h, w = depth.shape
         try:
             with self._lock:
                 intr = intrinsics(p, self._cam_in, w, h)
         except IntrinsicsRefused as exc:
             return self._refuse_frame(exc.reason, str(exc))
-        if p["nocs_convention"] == "nocs_dataset":
-            nocs = to_fcop_convention(nocs)
         est = estimate_focal(
             depth,
             nocs,
