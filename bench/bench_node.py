@@ -334,7 +334,7 @@ def main() -> None:
             f"publish): median {np.median(pc):.1f} ms, p95 {np.percentile(pc, 95):.1f} ms, "
             f"mean {pc.mean():.1f} ms; estimate_focal alone: median {np.median(ec):.1f} ms"
         )
-        wall_proc = np.array(node._proc_times) * 1000
+        wall_proc = np.array(node.processing_seconds) * 1000
         print(f"  node processing wall time per frame (convert + estimate + window; last "
               f"{len(wall_proc)}): median {np.median(wall_proc):.1f} ms")
         print(

@@ -160,6 +160,8 @@ def test_latest_is_the_last_camera_info_and_the_estimate_behind_it(harness):
         latest.focal = 1.0  # a frozen snapshot: the node cannot change it under the reader
     n = h.node.counts
     assert (n.received, n.matched, n.processed, n.camera_info_published) == (6, 2, 2, 2)
+    times = h.node.processing_seconds  # one per processed frame, what the benchmark reads
+    assert len(times) == 2 and all(0 < t < 60 for t in times)
 
 
 def test_reset_service_clears_window_and_the_latched_estimate(harness, capfd):

@@ -569,6 +569,12 @@ class FcopNode(Node):
         return self.worker.processed
 
     @property
+    def processing_seconds(self) -> tuple:
+        """Wall time of the last (up to 200) processed frames: conversion, estimate, window."""
+        with self._lock:
+            return tuple(self._proc_times)
+
+    @property
     def latest(self) -> LatestEstimate | None:
         """The last CameraInfo publication and the estimate behind it (None before the first)."""
         with self._pub_lock:
