@@ -234,9 +234,16 @@ def replay(
                 "object_markers": node.get_parameter("publish_markers").value,
             }
             wanted = [k for k, on in publish.items() if on]
-            spin_until(
-                lambda: all(consumed[k] + len(got[k]) >= node.counts.published for k in wanted)
-            )
+
+            def delivered():
+                # CameraInfo goes out per depth image (one without its frame too: a truncated
+                # bag's last), poses and markers per estimated frame.
+                n = node.counts
+                sent_out = {"camera_info": n.camera_info_published}
+                return all(consumed[k] + len(got[k]) >= sent_out.get(k, n.published)
+                           for k in wanted)
+
+            spin_until(delivered)
             for key in outputs:
                 consumed[key] += len(got[key])
                 for raw in got[key]:
