@@ -252,18 +252,25 @@ def to_dataset_convention(frame):
     ("fcop", "nocs_dataset", False),   # what happened before the parameter existed
 ])
 def test_nocs_convention_focal_and_pose(harness, convention, data, right):
+    """The README's figures: on camera_frame(0..2), 15 objects at 600 px, the wrong convention
+    leaves the focal at 600.00 px; 10 objects fit only as a mirror image and get no pose, the
+    other 5 (shapes whose mirror image is a rotation of them) get poses 53-155 degrees off."""
     h = harness(parameter_overrides=[Parameter("nocs_convention", value=convention),
                                      Parameter("max_uncertainty", value=1.0)])
-    fr = cam(0)
-    sent = fr if data == "fcop" else to_dataset_convention(fr)
-    assert h.frame(frame_messages(sent, T0))
-    assert spin_until(h.ex, lambda: len(h.poses) == 1 and len(h.markers) == 1, 10)
-    focal_err = abs(h.node.window.current.focal / 600.0 - 1)
-    rot = np.median(rotation_errors(h.poses.msgs[0], h.markers.msgs[0], fr))
+    posed, rot = 0, []
+    for k in range(3):
+        fr = cam(k)
+        sent = fr if data == "fcop" else to_dataset_convention(fr)
+        assert h.frame(frame_messages(sent, T0 + k * DT))
+        assert spin_until(h.ex, lambda: len(h.poses) == k + 1 and len(h.markers) == k + 1, 10)
+        assert abs(h.node.last_estimate.focal / 600.0 - 1) < 1e-5
+        posed += len(h.poses.msgs[k].poses)
+        rot += rotation_errors(h.poses.msgs[k], h.markers.msgs[k], fr)
     if right:
-        assert focal_err < 1e-3 and rot < 1.0, (focal_err, rot)
+        assert posed == 15 and max(rot) < 1.0, rot
     else:
-        assert focal_err > 0.05 or rot > 20.0, (focal_err, rot)
+        assert posed == 5 and min(rot) > 50.0, rot
+        assert h.node.warnings["mirrored_nocs"] == 10
 
 
 def test_output_qos_is_what_the_readme_says(harness):
