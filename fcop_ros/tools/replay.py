@@ -193,7 +193,8 @@ def main(argv=None) -> int:
         print(f"fcop_replay: {exc}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:
-        print("fcop_replay: interrupted; the outputs hold what was estimated before",
+        print("fcop_replay: interrupted" + ("" if args.play else
+                                           "; the outputs hold what was estimated before"),
               file=sys.stderr)
         return EXIT_INTERRUPTED
     print(summary.text())
