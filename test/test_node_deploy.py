@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 import yaml
+from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.srv import GetParameters
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -16,7 +17,7 @@ from sensor_msgs.msg import CameraInfo
 from sensor_msgs.srv import SetCameraInfo
 
 from msg_adapters import to_fcop_convention
-from fcop_ros.synthetic.scenes import camera_frame as cam, noisy_frame
+from fcop_ros.synthetic.scenes import camera_frame as cam, clean_frame, noisy_frame
 from ros_helpers import Recorder, frame_messages, ros_context, rotation_errors, spin_until
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -166,6 +167,30 @@ def test_camera_info_in_of_another_size_rejects_frames(harness):
     assert h.settle(1)
     assert h.node.rejected["camera_info_size_mismatch"] == 1 and h.node.camera_info_published == 0
     assert h.node.window.current.focal is None
+
+
+def test_camera_info_in_of_another_size_after_an_estimate_says_why_none_goes_out(harness):
+    """A new user's trial: a 640x480 camera_info_in for 320x240 images, after the node had an
+    estimate of their own, stopped every CameraInfo while /diagnostics read OK with the focal.
+    It now says WARN and why, until a camera_info_in of the images' size comes."""
+    h = harness()
+    small = [frame_messages(clean_frame(k, 320, 240, 300.0), T0 + k * DT) for k in range(4)]
+    assert h.frame(small[0])
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 10)
+    assert h.node.diagnostic_status().level == DiagnosticStatus.OK
+    pub = send_driver_info(h, driver_info(640, 480))
+    for msgs in small[1:3]:
+        assert h.frame(msgs)
+    assert h.node.rejected["camera_info_size_mismatch"] == 2 and len(h.info) == 1
+    status = h.node.diagnostic_status()
+    assert status.level == DiagnosticStatus.WARN, status.message
+    assert ("held back: no CameraInfo: camera_info_in is 640x480, the images are 320x240"
+            in status.message)
+    pub.publish(driver_info(320, 240, cx=160.0, cy=120.0))
+    assert spin_until(h.ex, lambda: h.node._cam_in.width == 320, 10)
+    assert h.frame(small[3])
+    assert spin_until(h.ex, lambda: len(h.info) == 2, 10)
+    assert h.node.diagnostic_status().level == DiagnosticStatus.OK
 
 
 # ----- ~/save_calibration (issue 10.4)

@@ -282,6 +282,13 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "focal 600.0 px held back: outside focal_range [700, 2000]",
         ),
         (
+            {"no_camera_info": "camera_info_in is 640x480, the images are 320x240"},
+            QUIET,
+            DiagnosticStatus.WARN,
+            "focal 600.0 px held back: no CameraInfo: camera_info_in is 640x480, the images are "
+            "320x240",
+        ),  # a new user's trial: no CameraInfo went out, diagnostics said OK
+        (
             {},
             Rates(5.0, 150, 40, 110),
             DiagnosticStatus.WARN,

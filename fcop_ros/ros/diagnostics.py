@@ -51,6 +51,9 @@ class DiagnosticsInput:
     # Why the newest frame the estimator took gave no focal: its input refused ("rejected: ...")
     # or no evidence in it; "" if it gave one.
     last_reason: str = ""
+    # Why no CameraInfo can be built for the images the publishable focal belongs to (a
+    # camera_info_in of another size, a principal point off the image); "" if it can.
+    no_camera_info: str = ""
 
 
 @dataclass(frozen=True)
@@ -102,7 +105,8 @@ class RateWindow:
 def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     """(level, message, {key: value}) of the node's status: ERROR when the estimator is stalled,
     WARN without a focal (saying so while the kernels are being prepared), with one held back by
-    focal_range (changed at run time) or max_uncertainty, when depth images keep coming but no
+    focal_range (changed at run time) or max_uncertainty, or for which no CameraInfo can be
+    built (camera_info_in of another size than the images), when depth images keep coming but no
     complete frame has matched lately (the estimate ages), or when the estimator skipped more
     frames than it estimated lately, or when most frames estimated lately, five or more, gave
     no focal (the
@@ -128,6 +132,9 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         level = WARN
         message = (held_back(win, d.max_uncertainty, d.focal_range)
                    or f"focal {win.focal:.1f} px held back: no image size yet")
+    elif d.no_camera_info:
+        level = WARN
+        message = f"focal {win.focal:.1f} px held back: no CameraInfo: {d.no_camera_info}"
     elif rates.answered > 0 and rates.matched == 0:
         level = WARN
         message = (

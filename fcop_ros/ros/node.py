@@ -778,6 +778,12 @@ class FcopNode(Node):
         now = self._now()
         with self._lock:  # the worker thread updates these while we read
             work = self.worker.state()
+            ready, no_camera_info = self.tracker.publishable, ""
+            if ready is not None:
+                try:
+                    intrinsics(self.p, self._cam_in, ready.width, ready.height)
+                except IntrinsicsRefused as exc:
+                    no_camera_info = str(exc)
             reading = DiagnosticsInput(
                 now=now,
                 window=self.window.current,
@@ -799,6 +805,7 @@ class FcopNode(Node):
                 kernels=compiled.describe(),
                 warming_up=self._warming_up,
                 last_reason=self._newest_refusal,
+                no_camera_info=no_camera_info,
             )
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped,
                                 reading.camera_info_published, self._no_focal_frames)
