@@ -198,6 +198,24 @@ def test_a_parameter_the_node_does_not_have_is_named(harness, capfd):
     assert "is not one of this node's" not in capfd.readouterr().err
 
 
+def test_setting_a_parameter_the_node_does_not_have_names_the_likely_one(harness, capfd):
+    """At run time rclpy refuses it with 'Invalid access to undeclared parameter(s): []', naming
+    none (a new user's trial, by the parameter service as `ros2 param set` calls it); the node
+    names it and the likely intended one in its log."""
+    from rcl_interfaces.srv import SetParameters
+    h = harness()
+    client = h.tester.create_client(SetParameters, "/fcop_node/set_parameters")
+    assert client.wait_for_service(timeout_sec=5.0)
+    request = SetParameters.Request(
+        parameters=[Parameter("window_frame", value=10).to_parameter_msg()])
+    future = client.call_async(request)
+    assert spin_until(h.ex, future.done, 10)
+    assert not future.result().results[0].successful
+    assert h.node.p["window_frames"] == 30
+    assert ("cannot set parameter window_frame: not one of this node's (did you mean "
+            "window_frames?)") in capfd.readouterr().err
+
+
 def test_integer_for_a_float_parameter_is_taken(harness):
     # `-p focal_min:=300` is what people type; rclpy alone refuses an INTEGER for a DOUBLE.
     h = harness(node_args=["--ros-args", "-p", "focal_min:=300"])

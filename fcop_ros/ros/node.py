@@ -127,7 +127,7 @@ class FcopNode(Node):
             Node.destroy_node(self)
             raise
         if hasattr(self, "add_pre_set_parameters_callback"):  # rclpy of Jazzy and later
-            self.add_pre_set_parameters_callback(self._integers_as_doubles)
+            self.add_pre_set_parameters_callback(self._before_set)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._now = time.monotonic  # the clock of rates and ages; replaceable in tests
@@ -260,15 +260,20 @@ class FcopNode(Node):
         ignores it without a word, and a misspelt name would leave its default in force."""
         for name in sorted(getattr(self, "_parameter_overrides", {})):
             if not self.has_parameter(name):
-                topics = sorted(s.topic_name for s in self._subs + [self.sub_info_in]) + [
-                    p.topic_name for p in (self.pub_info, self.pub_poses, self.pub_markers)]
-                hint = unknown_override_hint(name, topics)
-                if not hint:
-                    close = difflib.get_close_matches(name, list(PARAMETERS), n=1)
-                    hint = f" (did you mean {close[0]}?)" if close else ""
                 self.get_logger().warning(
-                    f"fcop_node: parameter {name} is not one of this node's; ignored{hint}"
+                    f"fcop_node: parameter {name} is not one of this node's; ignored"
+                    f"{self._unknown_parameter_hint(name)}"
                 )
+
+    def _unknown_parameter_hint(self, name: str) -> str:
+        """' (did you mean ...?)' for a name the node does not have, or ''."""
+        topics = sorted(s.topic_name for s in self._subs + [self.sub_info_in]) + [
+            p.topic_name for p in (self.pub_info, self.pub_poses, self.pub_markers)]
+        hint = unknown_override_hint(name, topics)
+        if not hint:
+            close = difflib.get_close_matches(name, list(PARAMETERS), n=1)
+            hint = f" (did you mean {close[0]}?)" if close else ""
+        return hint
 
     def _declare_parameters(self) -> None:
         """Declare every parameter with its descriptor (rclpy refuses a wrong type or range, turned
@@ -296,10 +301,17 @@ class FcopNode(Node):
         if problem:
             raise ParameterError(problem)
 
-    @staticmethod
-    def _integers_as_doubles(params) -> list:
-        """An integer set for a double parameter is that double (``ros2 param set ... focal_min
+    def _before_set(self, params) -> list:
+        """Before rclpy checks a set request: name a parameter the node does not have (rclpy
+        refuses it with "Invalid access to undeclared parameter(s): []", naming none), and take
+        an integer set for a double parameter as that double (``ros2 param set ... focal_min
         300`` sends an integer), as at start-up; rclpy would refuse it by type."""
+        for prm in params:
+            if not self.has_parameter(prm.name):
+                self._throttle.warn(
+                    "unknown_parameter",
+                    f"fcop_node: cannot set parameter {prm.name}: not one of this node's"
+                    f"{self._unknown_parameter_hint(prm.name)}")
         return [
             Parameter(prm.name, value=float(prm.value))
             if prm.name in PARAMETERS and isinstance(PARAMETERS[prm.name].default, float)
