@@ -885,5 +885,7 @@ def main(args=None) -> int:
     return 0
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+if __name__ == "__main__":  # python -m: as the console script, signals included
+    from fcop_ros.entry_points import fcop_node
+
+    raise SystemExit(fcop_node())

@@ -82,5 +82,7 @@ def main(argv=None) -> int:
     return 0 if summary.frames_estimated else 1
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+if __name__ == "__main__":  # python -m: as the console script, signals included
+    from fcop_ros.entry_points import fcop_demo
+
+    raise SystemExit(fcop_demo())

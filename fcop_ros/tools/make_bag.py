@@ -147,5 +147,7 @@ def main(argv=None) -> int:
     return 0
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+if __name__ == "__main__":  # python -m: as the console script, signals included
+    from fcop_ros.entry_points import fcop_make_bag
+
+    raise SystemExit(fcop_make_bag())

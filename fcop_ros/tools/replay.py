@@ -209,5 +209,7 @@ def main(argv=None) -> int:
     return EXIT_DAMAGED if summary.damaged else EXIT_OK
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+if __name__ == "__main__":  # python -m: as the console script, signals included
+    from fcop_ros.entry_points import fcop_replay
+
+    raise SystemExit(fcop_replay())
