@@ -405,3 +405,41 @@ def test_ctrl_c_that_surfaces_as_another_error_is_still_an_interruption(monkeypa
             entry_points.fcop_replay()
     finally:
         signal.signal(signal.SIGTERM, term)
+
+
+def test_sigint_while_play_publishes_ends_as_interrupted(tmp_path):
+    """A hostile trial: SIGINT to a --play started in the background by a shell script (which
+    starts it with SIGINT ignored, so Python raises no KeyboardInterrupt; rclpy's own handler
+    still shuts its context down) gave rclpy's 'publisher's context is invalid' traceback and
+    rc 1 (6 of 6 runs). Now 130 and one line, as for SIGTERM."""
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    from fcop_ros.ros.spin import ros_context, spin_until
+
+    bag = tmp_path / "bag"
+    mb.make_bag(bag, SequenceSpec(40, 160, 120, 200.0, None, None, "mild", 2), rate=10.0,
+                seed=1)
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOCALHOST_ONLY="1")
+    with ros_context() as (ctx, ex):
+        from rclpy.node import Node
+        listener = Node("listener", context=ctx)
+        got = []
+        listener.create_subscription(Image, "/camera/depth", got.append, qos_profile_sensor_data)
+        ex.add_node(listener)
+        proc = subprocess.Popen(
+            [os.path.join(os.path.dirname(sys.executable), "fcop_replay"), str(bag), "--play",
+             "--depth-topic", "/camera/depth", "--nocs-topic", "/camera/nocs", "--mask-topic",
+             "/camera/mask", "--wait-subscribers", "0", "--rate", "50", "--loop"],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))  # as `cmd &` does
+        try:
+            assert spin_until(ex, lambda: len(got) >= 2 or proc.poll() is not None, 60)
+            proc.send_signal(signal.SIGINT)
+            out, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert len(got) >= 2, err
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err, err

@@ -96,6 +96,7 @@ def play(
     and how the wait ended (``PlayResult.no_subscriber``: the topics still without one)."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
+    from rclpy.impl.implementation_singleton import rclpy_implementation
     from rclpy.node import Node
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Image
@@ -139,14 +140,21 @@ def play(
     def wait_until(due: float, start_wall: float, start_bag: int, ts: int) -> bool:
         """Sleep until ``due`` (monotonic), ticking /clock meanwhile; False when stopped."""
         period = 1.0 / clock_hz if clock_pub is not None and clock_hz > 0 else None
+        next_tick = time.monotonic() + period if period else float("inf")
         while True:
-            left = due - time.monotonic()
-            if left <= 0:
+            now = time.monotonic()
+            if now >= due:
                 return True
-            if stop.wait(min(left, period) if period else left):
+            # At most 0.1 s at a time: a signal rclpy took (its context shut down, no Python
+            # KeyboardInterrupt when SIGINT was ignored at start) ends a long gap too.
+            if stop.wait(min(due, next_tick, now + 0.1) - now):
                 return False
-            if period and time.monotonic() < due:
-                tick(min(ts, start_bag + int((time.monotonic() - start_wall) * rate * 1e9)))
+            if not node.context.ok():
+                raise KeyboardInterrupt
+            now = time.monotonic()
+            if now >= next_tick and now < due:
+                tick(min(ts, start_bag + int((now - start_wall) * rate * 1e9)))
+                next_tick += period * max(1, int((now - next_tick) / period) + 1)
 
     try:
         if wait_subscribers > 0:
@@ -173,6 +181,12 @@ def play(
             if not loop or start_wall is None:
                 break
     except ExternalShutdownException:  # SIGTERM or Ctrl-C: rclpy shut the context down
+        raise KeyboardInterrupt from None
+    except rclpy_implementation.RCLError:
+        # Ctrl-C while publishing: rclpy's handler shut the context down under the publisher
+        # ("publisher's context is invalid").
+        if node.context.ok():
+            raise
         raise KeyboardInterrupt from None
     finally:
         node.destroy_node()
