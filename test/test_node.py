@@ -273,6 +273,18 @@ def test_latched_estimate_for_late_joiners(harness):
     assert rec.msgs[0].k[0] == h.info.msgs[0].k[0]
 
 
+def test_diagnostics_go_on_under_sim_time_without_a_clock(harness):
+    """A hostile trial: under use_sim_time with /clock silent (a bag played without it, a
+    paused simulator) the node published no /diagnostics at all, so nothing could say so. The
+    timer runs on the steady clock, as the rates and ages it reports do."""
+    h = harness(parameter_overrides=[Parameter("use_sim_time", value=True),
+                                     Parameter("diagnostics_period", value=0.1)])
+    assert h.node.get_clock().now().nanoseconds == 0  # no /clock: sim time stands at zero
+    rec = Recorder(h.tester, DiagnosticArray, "/diagnostics")
+    assert spin_until(h.ex, lambda: len(rec) >= 3, 10)
+    assert rec.msgs[-1].status[0].level == DiagnosticStatus.WARN  # no estimate yet
+
+
 def test_diagnostics(harness):
     h = harness(parameter_overrides=[Parameter("diagnostics_period", value=0.1)])
     rec = Recorder(h.tester, DiagnosticArray, "/diagnostics")

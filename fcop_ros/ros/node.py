@@ -27,6 +27,7 @@ from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import ParameterException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -186,9 +187,7 @@ class FcopNode(Node):
             if self.p["set_camera_info_service"]
             else None
         )
-        self._diag_timer = self.create_timer(
-            float(self.p["diagnostics_period"]), self.publish_diagnostics
-        )
+        self._diag_timer = self._diagnostics_timer()
         self._warn_unknown_overrides()
         self.worker.start()
         self.get_logger().info(
@@ -348,9 +347,7 @@ class FcopNode(Node):
                                        (new["focal_min"], new["focal_max"]))
         if "diagnostics_period" in changed:
             self.destroy_timer(self._diag_timer)
-            self._diag_timer = self.create_timer(
-                float(new["diagnostics_period"]), self.publish_diagnostics
-            )
+            self._diag_timer = self._diagnostics_timer()
         return SetParametersResult(successful=True)
 
     def _new_sync(self) -> StampSynchronizer:
@@ -824,6 +821,13 @@ class FcopNode(Node):
         return diagnostic_status(
             f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading, rates
         )
+
+    def _diagnostics_timer(self):
+        """Every diagnostics_period of wall time (steady clock), as the rates and ages it reports
+        are: under use_sim_time the node's clock stops with /clock, and health reports must
+        not (a stalled bag or simulator is what they should show)."""
+        return self.create_timer(float(self.p["diagnostics_period"]), self.publish_diagnostics,
+                                 clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def publish_diagnostics(self) -> DiagnosticArray:
         msg = DiagnosticArray()
