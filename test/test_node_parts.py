@@ -301,6 +301,30 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "150 depth images in the last 5.0 s but no matched depth, NOCS and mask set",
         ),  # a reviewer stopped the NOCS topic: CameraInfo went on, diagnostics said OK
         (
+            {"window": WindowEstimate(None, reason="no frames yet"), "matched": 0,
+             "sync_dropped": 166, "rejected": {"sync_unmatched": 166}},
+            Rates(5.0, 0, 0, 0),
+            DiagnosticStatus.WARN,
+            "no focal estimate yet: no frames yet; no depth, NOCS and mask set has matched: 166 "
+            "messages dropped as unmatched: the inputs' stamps differ (exact sync needs equal "
+            "stamps; sync_mode approximate matches within sync_slop)",
+        ),  # a hostile trial: NOCS and mask stamped 3 and 6 ms after depth; no hint before
+        (
+            {"window": WindowEstimate(None, reason="window reset"), "matched": 0,
+             "sync_dropped": 399, "rejected": {"sync_queue_full": 399}},
+            Rates(5.0, 0, 0, 0),
+            DiagnosticStatus.WARN,
+            "399 messages dropped from full queues: an input is silent or stamped further "
+            "behind the others than queue_size messages (raise queue_size)",
+        ),  # the same trial: NOCS and mask 300 ms late at 30 Hz, queue_size 5
+        (
+            {"sync_dropped": 40, "rejected": {"sync_unmatched": 40}},
+            Rates(5.0, 0, 0, 0, answered=150),
+            DiagnosticStatus.WARN,
+            "no matched depth, NOCS and mask set (40 messages dropped as unmatched: the inputs' "
+            "stamps differ",
+        ),  # with an estimate, the same hint instead of blaming a silent topic
+        (
             {"busy_for": 1.0},
             QUIET,
             DiagnosticStatus.OK,

@@ -128,6 +128,8 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         level, message = WARN, f"no focal estimate yet: {win.reason}"
         if d.last_reason:
             message += f"; the newest frame: {d.last_reason}"
+        if d.matched == 0 and d.sync_dropped > 0:
+            message += f"; no depth, NOCS and mask set has matched: {_sync_hint(d.rejected)}"
     elif not d.publishable:
         level = WARN
         message = (held_back(win, d.max_uncertainty, d.focal_range)
@@ -139,8 +141,9 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         level = WARN
         message = (
             f"focal {win.focal:.1f} px from an ageing estimate: {rates.answered} depth images "
-            f"in the last {rates.span:.1f} s but no matched depth, NOCS and mask set (is the "
-            "NOCS or mask topic silent?)"
+            f"in the last {rates.span:.1f} s but no matched depth, NOCS and mask set ("
+            + (_sync_hint(d.rejected) if d.sync_dropped else "is the NOCS or mask topic "
+               "silent?") + ")"
         )
     elif rates.refused >= 5 and 2 * rates.refused > rates.processed:
         level = WARN
@@ -180,6 +183,20 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     values.update({f"rejected_{k}": str(v) for k, v in sorted(d.rejected.items())})
     values.update({f"warning_{k}": str(v) for k, v in sorted(d.warnings.items())})
     return level, message, values
+
+
+def _sync_hint(rejected: dict) -> str:
+    """What the synchroniser's drops (counted as rejected 'sync_<reason>') say about inputs that
+    do not match, and the parameter that answers it."""
+    unmatched = rejected.get("sync_unmatched", 0)
+    full = rejected.get("sync_queue_full", 0)
+    if unmatched >= full and unmatched:
+        return (f"{unmatched} messages dropped as unmatched: the inputs' stamps differ (exact "
+                "sync needs equal stamps; sync_mode approximate matches within sync_slop)")
+    if full:
+        return (f"{full} messages dropped from full queues: an input is silent or stamped "
+                "further behind the others than queue_size messages (raise queue_size)")
+    return "is the NOCS or mask topic silent?"
 
 
 def diagnostic_status(
