@@ -368,6 +368,8 @@ def test_stamps_must_be_finite_numbers_that_do_not_go_back():
         w.add(estimate(600.0), float("nan"))
     with pytest.raises(TypeError, match="seconds"):
         w.add(estimate(600.0), "6")
+    with pytest.raises(TypeError, match="seconds"):
+        w.add(estimate(600.0), True)  # a hostile trial: taken as 1.0 s before
     assert len(w) == 2
     w.reset()
     assert w.add(estimate(600.0), 0.0).frames == 1

@@ -130,7 +130,7 @@ class FocalWindow:
         otherwise, since ``max_age`` and the order of the frames rest on them. An estimate
         without ``std_rel`` (``method="ransac"``, ``refine=False``, the paper's method) is
         kept as a frame without evidence: the window weighs frames by it."""
-        if not isinstance(stamp, numbers.Real):
+        if isinstance(stamp, bool) or not isinstance(stamp, numbers.Real):
             raise TypeError(f"stamp must be a number of seconds, got {stamp!r}")
         stamp = float(stamp)
         if not np.isfinite(stamp):
