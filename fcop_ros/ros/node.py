@@ -404,15 +404,22 @@ class FcopNode(Node):
             waiting = self.sync.waiting_for()
             if jumped:  # before the new frames reach the worker
                 self._reset_locked()
-            for stamp_set, msgs in sets:
+            for k, (stamp_set, msgs) in enumerate(sets):
                 if self.worker.put((stamp_set, msgs)):
                     self.handoff_dropped += 1
                     self.rejected["estimator_busy"] += 1
-                    self._throttle.warn(
-                        "estimator_busy",
-                        "fcop_node: the estimator is slower than the input: "
-                        "skipped a frame (it works on the newest one)",
-                    )
+                    if k == 0:
+                        self._throttle.warn(
+                            "estimator_busy",
+                            "fcop_node: the estimator is slower than the input: "
+                            "skipped a frame (it works on the newest one)",
+                        )
+                    else:  # replaced by its own batch, however fast the estimator is
+                        self._throttle.info(
+                            "sets_at_once",
+                            f"fcop_node: {len(sets)} frames matched at once (held messages "
+                            "released, e.g. after a time jump); the estimator takes the newest",
+                        )
             for i, stamps, ref in outliers:
                 self.rejected[f"outlier_stamp_{INPUTS[i]}"] += len(stamps)
         for i, stamps, ref in outliers:
