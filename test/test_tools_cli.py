@@ -301,14 +301,11 @@ def _wait_for(condition, proc, timeout=60.0):
     return False
 
 
-def test_python_dash_m_runs_a_tool_as_its_console_script_does(tmp_path):
-    """`python -m fcop_ros.tools.make_bag` bypassed the console script's signal handling:
-    SIGTERM killed it (rc -15) with its bag unfinished. It now goes the same way."""
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOCALHOST_ONLY="1")
-    bag = tmp_path / "bag"
-    proc = subprocess.Popen([sys.executable, "-m", "fcop_ros.tools.make_bag", str(bag),
-                             "--frames", "400", "--width", "160", "--height", "120",
-                             "--compression", "none"],
+def _make_bag_until_sigterm(command: list, bag, env) -> tuple:
+    """Start ``command`` (fcop_make_bag, however invoked) writing 400 frames to ``bag``, send
+    SIGTERM once frames are on disk (the mcap file past its header); (return code, stderr)."""
+    proc = subprocess.Popen([*command, str(bag), "--frames", "400", "--width", "160",
+                             "--height", "120", "--compression", "none"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         started = _wait_for(lambda: any(p.stat().st_size > 200_000
@@ -319,7 +316,17 @@ def test_python_dash_m_runs_a_tool_as_its_console_script_does(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == 130 and err.strip().startswith("fcop_make_bag: interrupted"), err
+    return proc.returncode, err
+
+
+def test_python_dash_m_runs_a_tool_as_its_console_script_does(tmp_path):
+    """`python -m fcop_ros.tools.make_bag` bypassed the console script's signal handling:
+    SIGTERM killed it (rc -15) with its bag unfinished. It now goes the same way."""
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOCALHOST_ONLY="1")
+    bag = tmp_path / "bag"
+    code, err = _make_bag_until_sigterm([sys.executable, "-m", "fcop_ros.tools.make_bag"], bag,
+                                        env)
+    assert code == 130 and err.strip().startswith("fcop_make_bag: interrupted"), err
     assert (bag / "metadata.yaml").exists()
     run = subprocess.run([sys.executable, "-m", "fcop_ros.ros.node", "--help"],
                          capture_output=True, text=True, env=env, timeout=120)
@@ -334,20 +341,8 @@ def test_sigterm_closes_the_tools_outputs_as_ctrl_c_does(tmp_path):
     bin_dir = os.path.dirname(sys.executable)
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOCALHOST_ONLY="1")
     bag = tmp_path / "bag"
-    proc = subprocess.Popen([os.path.join(bin_dir, "fcop_make_bag"), str(bag), "--frames", "400",
-                             "--width", "160", "--height", "120", "--compression", "none"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    try:
-        # Some frames on disk: the mcap file past its header.
-        started = _wait_for(lambda: any(p.stat().st_size > 200_000
-                                        for p in bag.glob("*.mcap")), proc)
-        assert started, proc.communicate(timeout=60)
-        proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 130, err
+    code, err = _make_bag_until_sigterm([os.path.join(bin_dir, "fcop_make_bag")], bag, env)
+    assert code == 130, err
     assert err.strip().startswith("fcop_make_bag: interrupted") and "Traceback" not in err, err
     assert (bag / "metadata.yaml").exists()
     src = BagSource(bag)
