@@ -141,9 +141,8 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         level = WARN
         message = (
             f"focal {win.focal:.1f} px from an ageing estimate: {rates.answered} depth images "
-            f"in the last {rates.span:.1f} s but no matched depth, NOCS and mask set ("
-            + (_sync_hint(d.rejected) if d.sync_dropped else "is the NOCS or mask topic "
-               "silent?") + ")"
+            f"in the last {rates.span:.1f} s but no matched depth, NOCS and mask set "
+            f"({_sync_hint(d.rejected)})"
         )
     elif rates.refused >= 5 and 2 * rates.refused > rates.processed:
         level = WARN

@@ -747,7 +747,6 @@ class FcopNode(Node):
         response.success = False
         if est is None:
             response.message = why or "no image yet"
-        if est is None:
             self.get_logger().warning(f"fcop_node: calibration not saved: {response.message}")
             return response
         try:
@@ -803,7 +802,7 @@ class FcopNode(Node):
             reading = DiagnosticsInput(
                 now=now,
                 window=self.window.current,
-                publishable=self.tracker.publishable is not None,
+                publishable=ready is not None,
                 window_fill=f"{len(self.window)}/{self.p['window_frames']}",
                 max_uncertainty=self.p["max_uncertainty"],
                 focal_range=(self.p["focal_min"], self.p["focal_max"]),
