@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -17,6 +18,20 @@ from msg_adapters import (  # noqa: F401 (stamp_ns re-exported for the tests)
     depth_to_image, header_from_ns, mask_to_image, nocs_to_image, stamp_ns)
 
 FRAME_ID = "camera_optical_frame"
+
+
+def call_service(executor, client, request, timeout: float = 60.0, resend_after: float = 5.0):
+    """Call an idempotent service across processes and return its response, or None after
+    ``timeout`` s. A request is sent again when no response came in ``resend_after`` s: with
+    Fast DDS a server may answer before its response writer has matched the client's reader
+    (ros2/rmw_fastrtps#392), and that response is lost, though ``service_is_ready`` held."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        fut = client.call_async(request)
+        if spin_until(executor, fut.done, min(resend_after, deadline - time.monotonic())):
+            return fut.result()
+        client.remove_pending_request(fut)
+    return None
 
 
 def frame_messages(frame, stamp: int, depth_encoding="32FC1", nocs_encoding="32FC3",

@@ -18,7 +18,8 @@ from sensor_msgs.srv import SetCameraInfo
 
 from msg_adapters import to_fcop_convention
 from fcop_ros.synthetic.scenes import camera_frame as cam, clean_frame, noisy_frame
-from ros_helpers import Recorder, frame_messages, ros_context, rotation_errors, spin_until
+from ros_helpers import (
+    Recorder, call_service, frame_messages, ros_context, rotation_errors, spin_until)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config", "fcop.yaml")
@@ -73,11 +74,10 @@ def test_shipped_params_file_applies_to_the_installed_node_under_a_namespace(tmp
             ex.add_node(tester)
             client = tester.create_client(GetParameters, "/cam/fcop_ns/get_parameters")
             assert spin_until(ex, client.service_is_ready, 60), (tmp_path / "node.err").read_text()
-            fut = client.call_async(
-                GetParameters.Request(names=["window_frames", "camera_name", "queue_size"])
-            )
-            assert spin_until(ex, fut.done, 20)
-            got = fut.result().values
+            response = call_service(ex, client, GetParameters.Request(
+                names=["window_frames", "camera_name", "queue_size"]))
+            assert response is not None, (tmp_path / "node.err").read_text()
+            got = response.values
             assert [got[0].integer_value, got[1].string_value,
                     got[2].integer_value] == [45, "left", 5]
             tester.destroy_node()
