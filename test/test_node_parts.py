@@ -1,7 +1,9 @@
-"""The node's plain parts, each alone: the parameter schema, the one-slot worker, the
-diagnostics builder and the intrinsics of its CameraInfo (no DDS, no node)."""
+"""The node's plain parts, each alone: the parameter schema, the synchroniser step in the node's
+words, the one-slot worker, the diagnostics builder and the intrinsics of its CameraInfo (no DDS,
+no node)."""
 
 import threading
+from collections import Counter
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -20,6 +22,8 @@ from fcop_ros.ros.params import (
     defaults,
     descriptor,
 )
+from fcop_ros.ros.intake import sync_step
+from fcop_ros.ros.sync import StampSynchronizer
 from fcop_ros.ros.worker import LatestSlotWorker
 
 # ----- the parameter schema
@@ -88,6 +92,51 @@ def test_combination_rules():
     assert check_combination({**p, "noise_bound": 0.9, "noise_bound_mode": "absolute"}) == ""
     assert check_combination({**p, "principal_point_x": 700.0}) == ""  # image size not known yet
     assert "[0, 639]" in check_combination({**p, "principal_point_x": 700.0}, (640, 480))
+
+
+# ----- the synchroniser step, in the node's words
+
+INPUT_NAMES = ("depth", "nocs", "mask")
+SEC, FRAME_DT = 1_000_000_000, 33_333_333
+
+
+def _steps(sync, messages):
+    return [sync_step(sync, i, t, f"{INPUT_NAMES[i]}@{t}", INPUT_NAMES) for i, t in messages]
+
+
+def test_sync_step_names_the_silent_input_when_a_queue_overflows():
+    steps = _steps(StampSynchronizer(3, queue_size=2),
+                   [(0, 10 * SEC + k * FRAME_DT) for k in range(3)])
+    assert [st.dropped for st in steps] == [{}, {}, {"sync_queue_full": 1}]
+    assert steps[2].warnings == (("sync_queue_full", (
+        "fcop_node: dropped 1 message(s) in the synchroniser: queue full (depth 1); nothing from "
+        "nocs and mask to match them (silent, or stamped far from the others?)")),)
+    assert not any(st.sets or st.jumped for st in steps)
+    assert [len(st.accepted) for st in steps] == [1, 1, 1]  # each passed the stamp check
+
+
+def test_sync_step_counts_an_outlier_stamp_per_input_and_says_where_the_clock_was():
+    messages = [(i, 0 if (i, k) == (2, 2) else 10 * SEC + k * FRAME_DT)
+                for k in range(5) for i in range(3)]
+    steps = _steps(StampSynchronizer(3), messages)
+    dropped = sum((st.dropped for st in steps), Counter())
+    assert dropped == {"outlier_stamp_mask": 1, "sync_unmatched": 2}
+    lines = dict(w for st in steps for w in st.warnings)
+    assert lines["outlier_2"] == ("fcop_node: dropped 1 mask message(s) with an outlier stamp "
+                                  "(0.000 s; the mask stamps before were at 10.033 s)")
+    assert lines["sync_unmatched"].endswith("unmatched (depth 1, nocs 1)")
+    assert sum(len(st.sets) for st in steps) == 4 and not any(st.jumped for st in steps)
+
+
+def test_sync_step_reports_a_jump_back_once_for_the_node_to_reset():
+    messages = [(i, t * SEC + k * FRAME_DT) for t in (10, 2) for k in range(4) for i in range(3)]
+    steps = _steps(StampSynchronizer(3), messages)
+    jumps = [n for n, st in enumerate(steps) if st.jumped]
+    assert len(jumps) == 1 and steps[jumps[0]].warnings == ((
+        "time_jump", "fcop_node: time jumped back (looped bag?): synchroniser and window reset"),)
+    # The held depth messages that confirmed the jump are released with it, then matched.
+    assert [m[1] for m in steps[jumps[0]].accepted] == [2 * SEC + k * FRAME_DT for k in range(3)]
+    assert sum(len(st.sets) for st in steps) == 8
 
 
 # ----- the one-slot worker

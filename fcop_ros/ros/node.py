@@ -53,6 +53,7 @@ from .answers import DepthAnswers
 from .calibration import default_calibration_path, write_calibration
 from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
+from .intake import sync_step
 from .intrinsics import IntrinsicsRefused, camera_info_with, intrinsics
 from .params import (
     ESTIMATOR_PARAMETERS,
@@ -390,76 +391,44 @@ class FcopNode(Node):
 
     # ----- input side: cheap, never waits for the estimator
     def _on_image(self, index: int, msg: Image) -> None:
-        stamp = stamp_ns(msg)
         with self._lock:
             self.received += 1
-            before = Counter(self.sync.stats.dropped)
-            before_inputs = Counter(self.sync.stats.per_input)
-            resets = self.sync.stats.resets
-            sets = self.sync.add(index, stamp, msg)
-            accepted, outliers = self.sync.accepted, self.sync.outliers_dropped
-            new_drops = self.sync.stats.dropped - before
-            new_inputs = self.sync.stats.per_input - before_inputs
-            jumped = self.sync.stats.resets != resets
-            waiting = self.sync.waiting_for()
-            if jumped:  # before the new frames reach the worker
+            step = sync_step(self.sync, index, stamp_ns(msg), msg, INPUTS)
+            if step.jumped:  # before the new frames reach the worker
                 self._reset_locked()
-            for k, (stamp_set, msgs) in enumerate(sets):
-                if self.worker.put((stamp_set, msgs)):
-                    self.handoff_dropped += 1
-                    self.rejected["estimator_busy"] += 1
-                    if k == 0:
-                        self._throttle.warn(
-                            "estimator_busy",
-                            "fcop_node: the estimator is slower than the input: "
-                            "skipped a frame (it works on the newest one)",
-                        )
-                    else:  # replaced by its own batch, however fast the estimator is
-                        self._throttle.info(
-                            "sets_at_once",
-                            f"fcop_node: {len(sets)} frames matched at once (held messages "
-                            "released, e.g. after a time jump); the estimator takes the newest",
-                        )
-            for i, stamps, ref in outliers:
-                self.rejected[f"outlier_stamp_{INPUTS[i]}"] += len(stamps)
-        for i, stamps, ref in outliers:
-            self._throttle.warn(
-                f"outlier_{i}",
-                f"fcop_node: dropped {len(stamps)} {INPUTS[i]} message(s) with an "
-                f"outlier stamp ({', '.join(_sec(s) for s in stamps)}; the "
-                f"{INPUTS[i]} stamps before were at {_sec(ref)})",
-            )
-        if jumped:
+            self.rejected.update(step.dropped)
+            self._hand_off(step.sets)
+        if step.jumped:
             with self._pub_lock:
                 self._answers.forget()
-        for stamp_set, msgs in sets:
+        for _, msgs in step.sets:
             self._check_frame_ids(msgs)
-        for i, s, m in accepted:
+        for i, stamp, m in step.accepted:
             if i == 0:
-                self._answer_depth(s, m)
-        if jumped:
-            self._throttle.warn(
-                "time_jump",
-                "fcop_node: time jumped back (looped bag?): synchroniser and window reset",
-            )
-        for reason, n in new_drops.items():
-            if reason == "outlier_stamp":  # counted per input above
+                self._answer_depth(stamp, m)
+        for key, text in step.warnings:
+            self._throttle.warn(key, text)
+
+    def _hand_off(self, sets) -> None:
+        """Give the worker each matched frame (under self._lock); a frame it had not taken yet
+        is replaced and counted."""
+        for k, item in enumerate(sets):
+            if not self.worker.put(item):
                 continue
-            self._reject("sync_" + reason, n)
-            if reason == "time_jump_reset":
-                continue
-            which = ", ".join(
-                f"{INPUTS[i]} {k}" for (r, i), k in sorted(new_inputs.items()) if r == reason
-            )
-            silent = ""
-            if reason == "queue_full" and waiting:
-                silent = (f"; nothing from {' and '.join(INPUTS[i] for i in waiting)} to "
-                          "match them (silent, or stamped far from the others?)")
-            self._throttle.warn(
-                "sync_" + reason,
-                f"fcop_node: dropped {n} message(s) in the synchroniser: "
-                f"{reason.replace('_', ' ')} ({which}){silent}",
-            )
+            self.handoff_dropped += 1
+            self.rejected["estimator_busy"] += 1
+            if k == 0:
+                self._throttle.warn(
+                    "estimator_busy",
+                    "fcop_node: the estimator is slower than the input: skipped a frame (it "
+                    "works on the newest one)",
+                )
+            else:  # replaced by its own batch, however fast the estimator is
+                self._throttle.info(
+                    "sets_at_once",
+                    f"fcop_node: {len(sets)} frames matched at once (held messages released, "
+                    "e.g. after a time jump); the estimator takes the newest",
+                )
 
     def _check_frame_ids(self, msgs) -> None:
         ids = [m.header.frame_id for m in msgs]
@@ -846,10 +815,6 @@ class FcopNode(Node):
         if self.worker is not None:
             self.worker.stop(timeout=5.0)
         return super().destroy_node()
-
-
-def _sec(stamp) -> str:
-    return "none" if stamp is None else f"{stamp / 1e9:.3f} s"
 
 
 def main(args=None) -> int:
