@@ -475,9 +475,13 @@ def test_mismatched_and_empty_frame_ids_are_warned(harness, capfd):
     m.header = header_from_ns(T0 + DT, "")
     assert h.frame((d, n, m))
     assert h.node.warnings == {"frame_id_mismatch": 1, "frame_id_empty": 1}
+    d, n, m = frame_messages(clean_frame(4), T0 + 2 * DT)  # both at once: each is counted
+    n.header, m.header = header_from_ns(T0 + 2 * DT, "nocs_frame"), header_from_ns(T0 + 2 * DT, "")
+    assert h.frame((d, n, m))
+    assert h.node.warnings == {"frame_id_mismatch": 2, "frame_id_empty": 2}
     err = capfd.readouterr().err
     assert "nocs 'nocs_frame'" in err and "mask ''" in err
-    assert h.node.rejected.total() == 0 and len(h.node.window) == 2  # warned, still used
+    assert h.node.rejected.total() == 0 and len(h.node.window) == 3  # warned, still used
 
 
 def test_header_is_copied_from_depth(harness):

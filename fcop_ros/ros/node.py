@@ -431,17 +431,21 @@ class FcopNode(Node):
                 )
 
     def _check_frame_ids(self, msgs) -> None:
+        """Count and warn (the outputs use the depth image's frame_id) where a frame's inputs
+        leave it empty, name different frames, or both."""
         ids = [m.header.frame_id for m in msgs]
-        if not all(ids) or len(set(ids)) > 1:
-            reason = "frame_id_empty" if not all(ids) else "frame_id_mismatch"
-            with self._lock:
-                self.warnings[reason] += 1
-            self._throttle.warn(
-                reason,
-                "fcop_node: the inputs of one frame name different or empty frame_ids ("
-                + ", ".join(f"{n} {i!r}" for n, i in zip(INPUTS, ids))
-                + "): the outputs use the depth image's",
-            )
+        reasons = [r for r, bad in (("frame_id_empty", not all(ids)),
+                                    ("frame_id_mismatch", len({i for i in ids if i}) > 1)) if bad]
+        if not reasons:
+            return
+        with self._lock:
+            self.warnings.update(reasons)
+        self._throttle.warn(
+            reasons[0],
+            "fcop_node: the inputs of one frame name different or empty frame_ids ("
+            + ", ".join(f"{n} {i!r}" for n, i in zip(INPUTS, ids))
+            + "): the outputs use the depth image's",
+        )
 
     def _answer_depth(self, stamp: int, msg: Image) -> None:
         """Publish the CameraInfo of one depth image with the current estimate, if there is one."""
