@@ -1,5 +1,5 @@
 """The README and config/fcop.yaml describe the node as it is: every parameter, with its
-default."""
+default and its range or choices, and every value of its /diagnostics status."""
 
 import os
 import re
@@ -34,6 +34,40 @@ def test_readme_parameter_table_lists_every_parameter_with_its_default():
             else '""'
         )
         assert shown == expected, (name, shown, expected)
+
+
+def _number(text: str) -> float:
+    return float(text.replace("2³¹-1", str(2**31 - 1)))
+
+
+def test_readme_parameter_table_gives_each_range_and_choice_as_the_node_enforces_it():
+    text = open(os.path.join(ROOT, "README.md")).read()
+    rows = dict(re.findall(r"^\| `(\w+)` \|[^|]+\|([^|]*)\|", text, flags=re.M))
+    for name, spec in PARAMETERS.items():
+        shown = rows[name].strip()
+        if spec.range is not None:
+            low, high = shown.split(",")[0].split(" .. ")
+            assert (_number(low), _number(high)) == tuple(map(float, spec.range)), (name, shown)
+        elif spec.choices:
+            assert shown == " / ".join(spec.choices), (name, shown)
+        elif isinstance(spec.default, bool):
+            assert shown == "", (name, shown)
+
+
+def test_readme_lists_every_diagnostics_value_the_node_sends():
+    from fcop_ros.core import WindowEstimate
+    from fcop_ros.ros.diagnostics import DiagnosticsInput, Rates, status_fields
+
+    reading = DiagnosticsInput(
+        now=1.0, window=WindowEstimate(600.0, std_rel=0.01, support=50, frames=3),
+        publishable=True, window_fill="3/30", max_uncertainty=0.05, max_estimate_age=2.0,
+        matched=3, processed=3, skipped=0, sync_dropped=0, camera_info_published=3)
+    sent = set(status_fields(reading, Rates(5.0, 3, 3, 0))[2])
+    text = open(os.path.join(ROOT, "README.md")).read()
+    listed = text[text.index("Values:\n`focal_px`"):].split("\n\n")[0]
+    named = set(re.findall(r"`(\w+)`", listed)) - {"rejected_", "warning_"}
+    assert named == sent, (sorted(sent - named), sorted(named - sent))
+    assert "`rejected_<reason>`" in listed and "`warning_<reason>`" in listed
 
 
 def test_the_node_defaults_are_the_library_defaults():
