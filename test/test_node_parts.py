@@ -84,6 +84,23 @@ def test_an_integer_for_a_double_is_taken_as_a_double():
     assert check_value("focal_min", 300) == 300.0 and type(check_value("focal_min", 300)) is float
 
 
+def test_run_time_change_sets_hold_every_parameter_their_builders_read_under_any_choice():
+    """A parameter read only under one choice (sync_slop only when sync_mode is approximate)
+    would be missed by the sets taken at the defaults, and its change ignored at run time."""
+    import itertools
+
+    from fcop_ros.ros import params as pm
+
+    builders = {pm.estimator_options: pm.ESTIMATOR_PARAMETERS, pm.window_options:
+                pm.WINDOW_PARAMETERS, pm.gate_settings: pm.GATE_PARAMETERS,
+                pm.sync_settings: pm.SYNC_PARAMETERS}
+    chosen = [n for n, spec in PARAMETERS.items() if spec.choices]
+    for picks in itertools.product(*(PARAMETERS[n].choices for n in chosen)):
+        values = {**defaults(), **dict(zip(chosen, picks))}
+        for build, names in builders.items():
+            assert pm._read_by(build, values) == names, (build.__name__, picks)
+
+
 def test_combination_rules():
     p = defaults()
     assert check_combination(p) == ""

@@ -57,6 +57,7 @@ from .intake import sync_step
 from .intrinsics import IntrinsicsRefused, camera_info_with, intrinsics
 from .params import (
     ESTIMATOR_PARAMETERS,
+    GATE_PARAMETERS,
     PARAMETERS,
     SYNC_PARAMETERS,
     WINDOW_PARAMETERS,
@@ -66,6 +67,8 @@ from .params import (
     check_words,
     descriptor,
     estimator_options,
+    gate_settings,
+    sync_settings,
     window_options,
 )
 from .qos import input_qos, latched_qos, output_qos, refused_override, unknown_override_hint
@@ -172,8 +175,7 @@ class FcopNode(Node):
         self.estimator_options = estimator_options(self.p)
         # The window, the image size it holds and the publish gate; under self._lock.
         self.tracker = FocalTracker(
-            window_options(self.p), self.p["max_uncertainty"],
-            (self.p["focal_min"], self.p["focal_max"]))
+            window_options(self.p), *gate_settings(self.p))
         try:
             self._create_topics()
         except ParameterError:
@@ -337,23 +339,18 @@ class FcopNode(Node):
         with self._lock:
             self.p = new
             if changed & SYNC_PARAMETERS:
-                self.sync.configure(
-                    new["queue_size"],
-                    new["sync_slop"] if new["sync_mode"] == "approximate" else 0.0,
-                )
+                self.sync.configure(*sync_settings(new))
             if changed & ESTIMATOR_PARAMETERS:
                 self.estimator_options = estimator_options(new)
-            if changed & (WINDOW_PARAMETERS | {"max_uncertainty", "focal_min", "focal_max"}):
-                self.tracker.configure(window_options(new), new["max_uncertainty"],
-                                       (new["focal_min"], new["focal_max"]))
+            if changed & (WINDOW_PARAMETERS | GATE_PARAMETERS):
+                self.tracker.configure(window_options(new), *gate_settings(new))
         if "diagnostics_period" in changed:
             self.destroy_timer(self._diag_timer)
             self._diag_timer = self._diagnostics_timer()
         return SetParametersResult(successful=True)
 
     def _new_sync(self) -> StampSynchronizer:
-        slop = self.p["sync_slop"] if self.p["sync_mode"] == "approximate" else 0.0
-        return StampSynchronizer(len(INPUTS), self.p["queue_size"], slop)
+        return StampSynchronizer(len(INPUTS), *sync_settings(self.p))
 
     @property
     def window(self):
@@ -778,7 +775,7 @@ class FcopNode(Node):
                 publishable=ready is not None,
                 window_fill=f"{len(self.window)}/{self.p['window_frames']}",
                 max_uncertainty=self.p["max_uncertainty"],
-                focal_range=(self.p["focal_min"], self.p["focal_max"]),
+                focal_range=gate_settings(self.p)[1],
                 max_estimate_age=self.p["max_estimate_age"],
                 matched=self.sync.stats.matched,
                 processed=work.processed,

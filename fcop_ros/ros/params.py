@@ -173,22 +173,6 @@ PARAMETERS: dict[str, ParamSpec] = {
 }
 # Set once at start-up: refused at run time (the descriptor says read_only).
 READ_ONLY = frozenset(name for name, spec in PARAMETERS.items() if spec.read_only)
-SYNC_PARAMETERS = frozenset({"sync_mode", "sync_slop", "queue_size"})
-WINDOW_PARAMETERS = frozenset(
-    {"window_frames", "window_seconds", "min_frames", "min_window_votes"}
-)
-ESTIMATOR_PARAMETERS = frozenset(
-    {
-        "triplets_per_object",
-        "noise_bound",
-        "noise_bound_mode",
-        "focal_min",
-        "focal_max",
-        "min_object_pixels",
-    }
-)
-
-
 def estimator_options(p: dict) -> EstimatorOptions:
     """The estimator's settings from a complete set of parameter values."""
     return EstimatorOptions(
@@ -210,9 +194,49 @@ def window_options(p: dict) -> WindowOptions:
     )
 
 
+def sync_settings(p: dict) -> tuple:
+    """The synchroniser's (queue_size, slop in seconds; 0 = exact matching)."""
+    queue_size, slop, mode = p["queue_size"], p["sync_slop"], p["sync_mode"]
+    return queue_size, (slop if mode == "approximate" else 0.0)
+
+
+def gate_settings(p: dict) -> tuple:
+    """The publish gate's (max_uncertainty, (focal_min, focal_max))."""
+    return p["max_uncertainty"], (p["focal_min"], p["focal_max"])
+
+
 def defaults() -> dict:
     """{name: default} of every parameter."""
     return {name: spec.default for name, spec in PARAMETERS.items()}
+
+
+class _Reads(dict):
+    """Parameter values that note which of them a builder reads."""
+
+    def __init__(self, values):
+        super().__init__(values)
+        self.read = set()
+
+    def __getitem__(self, name):
+        self.read.add(name)
+        return super().__getitem__(name)
+
+
+def _read_by(build, values: dict | None = None) -> frozenset:
+    """The parameters ``build`` reads from ``values`` (the defaults); builders read every
+    parameter they depend on whatever the values, so that this finds them all."""
+    values = _Reads(defaults() if values is None else values)
+    build(values)
+    return frozenset(values.read)
+
+
+# Which run-time changes rebuild the estimator's options, the window, the publish gate or the
+# synchroniser: the parameters their builders read, so none can be wired into a builder and
+# left out here.
+ESTIMATOR_PARAMETERS = _read_by(estimator_options)
+WINDOW_PARAMETERS = _read_by(window_options)
+GATE_PARAMETERS = _read_by(gate_settings)
+SYNC_PARAMETERS = _read_by(sync_settings)
 
 
 def allowed(name: str, value=None) -> str:
