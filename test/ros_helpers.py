@@ -150,15 +150,15 @@ class Gate:
     """Holds the node's estimator: once closed, every frame estimate waits until it is opened."""
 
     def __init__(self, monkeypatch):
-        import fcop_ros.ros.node as node_module
+        import fcop_ros.ros.frame_estimate as frame_module
         self.event = threading.Event()
         self.event.set()
-        real = node_module.estimate_focal
+        real = frame_module.estimate_focal
 
         def gated(*args, **kwargs):
             self.event.wait(60)
             return real(*args, **kwargs)
-        monkeypatch.setattr(node_module, "estimate_focal", gated)
+        monkeypatch.setattr(frame_module, "estimate_focal", gated)
 
     def close(self):
         self.event.clear()

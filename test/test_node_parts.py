@@ -22,6 +22,7 @@ from fcop_ros.ros.params import (
     defaults,
     descriptor,
 )
+from fcop_ros.ros.frame_estimate import FrameRefused, estimate_frame
 from fcop_ros.ros.intake import sync_step
 from fcop_ros.ros.sync import StampSynchronizer
 from fcop_ros.ros.worker import LatestSlotWorker
@@ -154,6 +155,45 @@ def test_sync_step_reports_a_jump_back_once_for_the_node_to_reset():
     # The held depth messages that confirmed the jump are released with it, then matched.
     assert [m[1] for m in steps[jumps[0]].accepted] == [2 * SEC + k * FRAME_DT for k in range(3)]
     assert sum(len(st.sets) for st in steps) == 8
+
+
+# ----- one frame's messages to its estimate
+
+
+def test_estimate_frame_is_the_core_estimate_of_the_images_and_names_what_it_refuses():
+    import numpy as np
+    from sensor_msgs.msg import CameraInfo
+
+    from fcop_ros.core import estimate_focal
+    from fcop_ros.ros.params import defaults, estimator_options
+    from fcop_ros.synthetic.scenes import camera_frame
+    from msg_adapters import depth_to_image, header_from_ns, mask_to_image, nocs_to_image
+
+    fr, head = camera_frame(4), header_from_ns(1, "cam")
+    msgs = (depth_to_image(fr.depth, "32FC1", head), nocs_to_image(fr.nocs, "32FC3", head),
+            mask_to_image(fr.mask, "mono8", head))
+    p, opts = defaults(), estimator_options(defaults())
+    got = estimate_frame(msgs, p, None, opts, np.random.default_rng(3))
+    h, w = fr.depth.shape
+    seed = int(np.random.default_rng(3).integers(2**31))
+    want = estimate_focal(fr.depth.astype(np.float32), fr.nocs.astype(np.float32), fr.mask,
+                          ((w - 1) / 2, (h - 1) / 2), options=opts, poses=False, seed=seed)
+    assert got.size == (w, h) and got.estimate.focal == pytest.approx(want.focal, rel=1e-9)
+    assert abs(got.estimate.focal / 600.0 - 1) < 0.01
+
+    small = mask_to_image(fr.mask[:-2], "mono8", head)
+    wrong = depth_to_image(fr.depth, "32FC1", head)
+    wrong.encoding = "rgb8"
+    other = CameraInfo(width=w // 2, height=h // 2)
+    cases = [((msgs[0], msgs[1], small), None, "size_mismatch"),
+             ((wrong, msgs[1], msgs[2]), None, "bad_encoding"),
+             (msgs, other, "camera_info_size_mismatch")]
+    rng = np.random.default_rng(0)
+    for frame_msgs, info, reason in cases:
+        with pytest.raises(FrameRefused) as refused:
+            estimate_frame(frame_msgs, p, info, opts, rng)
+        assert refused.value.reason == reason and str(refused.value)
+    assert rng.integers(2**31) == np.random.default_rng(0).integers(2**31)  # no draw spent
 
 
 # ----- the one-slot worker

@@ -37,22 +37,15 @@ from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
-from msg_adapters import (
-    ImageFormatError,
-    ImageSizeMismatch,
-    frame_from_images,
-    marker_array,
-    object_poses,
-    pose_array,
-    stamp_ns,
-)
+from msg_adapters import marker_array, object_poses, pose_array, stamp_ns
 
-from ..core import compiled, estimate_focal, estimate_poses
+from ..core import compiled, estimate_poses
 from .allocator import limit_allocator_arenas
 from .answers import DepthAnswers
 from .calibration import default_calibration_path, write_calibration
 from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
+from .frame_estimate import FrameRefused, estimate_frame
 from .intake import sync_step
 from .intrinsics import IntrinsicsRefused, camera_info_with, intrinsics
 from .params import (
@@ -590,30 +583,15 @@ class FcopNode(Node):
         """Estimate one synchronised frame, update the window and publish the frame's poses and
         markers; returns True when the window has a publishable estimate afterwards."""
         t0 = time.perf_counter()
-        depth_msg, nocs_msg, mask_msg = msgs
+        depth_msg = msgs[0]
         p = self.p
+        with self._lock:
+            camera_info_in = self._cam_in
         try:
-            depth, nocs, mask = frame_from_images(
-                depth_msg, nocs_msg, mask_msg, p["depth_scale"], p["nocs_convention"])
-        except ImageSizeMismatch as exc:
-            return self._refuse_frame("size_mismatch", str(exc))
-        except ImageFormatError as exc:
-            return self._refuse_frame("bad_encoding", str(exc))
-        h, w = depth.shape
-        try:
-            with self._lock:
-                intr = intrinsics(p, self._cam_in, w, h)
-        except IntrinsicsRefused as exc:
+            frame = estimate_frame(msgs, p, camera_info_in, self.estimator_options, self._rng)
+        except FrameRefused as exc:
             return self._refuse_frame(exc.reason, str(exc))
-        est = estimate_focal(
-            depth,
-            nocs,
-            mask,
-            (intr.cx, intr.cy),
-            options=self.estimator_options,
-            poses=False,
-            seed=int(self._rng.integers(2**31)),
-        )
+        est, (w, h) = frame.estimate, frame.size
         if est.mirrored:
             with self._lock:
                 self.warnings["mirrored_nocs"] += len(est.mirrored)

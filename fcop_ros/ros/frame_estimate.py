@@ -1,0 +1,51 @@
+"""One matched frame's three Image messages to a FocalEstimate, without rclpy: the images as
+arrays (:func:`msg_adapters.frame_from_images`), the principal point (:mod:`.intrinsics`) and
+the estimate. The node's estimator thread calls it and counts what it refuses; the window, the
+poses and publishing stay with the node."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from msg_adapters import ImageFormatError, ImageSizeMismatch, frame_from_images
+
+from ..core import FocalEstimate, estimate_focal
+from .intrinsics import IntrinsicsRefused, intrinsics
+
+
+class FrameRefused(Exception):
+    """A frame the estimator cannot use: ``reason`` is the node's drop counter, the text says
+    why."""
+
+    def __init__(self, reason: str, text: str):
+        super().__init__(text)
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class FrameEstimate:
+    """The frame's estimate and its image size (width, height)."""
+
+    estimate: FocalEstimate
+    size: tuple
+
+
+def estimate_frame(msgs, params: dict, camera_info_in, options, rng) -> FrameEstimate:
+    """Estimate the focal length of one (depth, nocs, mask) message set under the node's
+    parameter values ``params`` and estimator ``options``, its triplets seeded from ``rng`` (a
+    numpy Generator, drawn only for a frame that is estimated); FrameRefused for images of the
+    wrong encoding or size, or whose principal point cannot be had (see :func:`.intrinsics`)."""
+    try:
+        depth, nocs, mask = frame_from_images(
+            *msgs, params["depth_scale"], params["nocs_convention"])
+    except ImageSizeMismatch as exc:
+        raise FrameRefused("size_mismatch", str(exc)) from None
+    except ImageFormatError as exc:
+        raise FrameRefused("bad_encoding", str(exc)) from None
+    h, w = depth.shape
+    try:
+        intr = intrinsics(params, camera_info_in, w, h)
+    except IntrinsicsRefused as exc:
+        raise FrameRefused(exc.reason, str(exc)) from None
+    est = estimate_focal(depth, nocs, mask, (intr.cx, intr.cy), options=options, poses=False,
+                         seed=int(rng.integers(2**31)))
+    return FrameEstimate(est, (w, h))
