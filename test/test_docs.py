@@ -61,7 +61,8 @@ def test_readme_lists_every_diagnostics_value_the_node_sends():
     reading = DiagnosticsInput(
         now=1.0, window=WindowEstimate(600.0, std_rel=0.01, support=50, frames=3),
         publishable=True, window_fill="3/30", max_uncertainty=0.05, max_estimate_age=2.0,
-        matched=3, processed=3, skipped=0, sync_dropped=0, camera_info_published=3)
+        matched=3, processed=3, skipped=0, sync_dropped=0, camera_info_published=3,
+        input_ages=(("depth", 0.01), ("nocs", 0.02), ("mask", 0.02)))
     sent = set(status_fields(reading, Rates(5.0, 3, 3, 0))[2])
     text = open(os.path.join(ROOT, "README.md")).read()
     listed = text[text.index("Values:\n`focal_px`"):].split("\n\n")[0]

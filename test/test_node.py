@@ -1,6 +1,7 @@
 """fcop_node in-process: a private Context, the node and a test node in one executor, spun
 until a condition holds with a deadline."""
 import os
+import time
 
 import numpy as np
 import pytest
@@ -376,7 +377,11 @@ def test_stamps_backwards_and_silent_topic(harness, capfd):
     h.send(frame_messages(fr, T0 + 5 * DT))  # slightly back: late, dropped
     assert spin_until(h.ex, lambda: h.node.rejected["sync_late"] == 3, 10)
     assert h.node.sync.stats.matched == 1
-    # One input silent: nothing is matched, the other queues stay bounded (drop oldest).
+    # One input silent: nothing is matched, the other queues stay bounded (drop oldest). Its
+    # silence shows once no frame has matched for 5 s (before, drops are how a slower input
+    # meets a faster one): the node's clock is moved on past that.
+    later = time.monotonic() + 6.0
+    h.node._now = lambda: later
     seen = lambda: h.node.sync.pending() + h.node.rejected["sync_queue_full"]  # noqa: E731
     for k in range(12):
         h.send(frame_messages(fr, T0 + (20 + k) * DT), which=(0, 1))
@@ -386,7 +391,8 @@ def test_stamps_backwards_and_silent_topic(harness, capfd):
     # the log names the inputs dropped and the silent one they waited for
     err = capfd.readouterr().err
     assert "in the synchroniser: queue full (depth 1)" in err
-    assert "nothing from mask to match them (silent, or stamped far from the others?)" in err
+    assert ("nothing from mask to match them: silent, or later than queue_size (5) messages of "
+            "the others (raise queue_size to cover that delay times their rate)") in err
     assert h.node.sync.stats.matched == 1 and h.node.sync.pending() <= 2 * h.node.p["queue_size"]
     # A sustained jump back (a looped bag: three frames) resets the synchroniser and the window,
     # and uses the frames it held while waiting for the confirmation.
@@ -678,3 +684,24 @@ def test_depth_without_nocs_ages_the_estimate_and_diagnostics_say_so(harness):
     st = h.node.diagnostic_status()
     assert st.level == DiagnosticStatus.WARN, st.message
     assert "3 depth images" in st.message and "no matched depth, NOCS and mask set" in st.message
+    # Five seconds on (the node's clock moved), with depth still coming: the message names the
+    # inputs that went silent.
+    later = time.monotonic() + 6.0
+    h.node._now = lambda: later
+    h.send(frame_messages(clean_frame(1), T0 + 4 * DT), which=(0,))
+    assert spin_until(h.ex, lambda: h.node.camera_info_published == 5, 10)
+    st = h.node.diagnostic_status()
+    assert "no nocs message for 6." in st.message and "no mask message for 6." in st.message
+    values = {kv.key: float(kv.value) for kv in st.values if kv.key.endswith("_age_s")}
+    assert values["depth_age_s"] == 0.0 and values["nocs_age_s"] > 6.0, values
+
+
+def test_every_input_silent_warns_that_the_focal_is_an_old_one(harness):
+    """A hostile trial stopped the camera: /diagnostics said OK, 'focal 601.1 px', for 20 s."""
+    h = harness()
+    assert h.frame(frame_messages(clean_frame(1), T0))
+    assert h.node.diagnostic_status().level == DiagnosticStatus.OK
+    later = time.monotonic() + 6.0
+    h.node._now = lambda: later
+    st = h.node.diagnostic_status()
+    assert st.level == DiagnosticStatus.WARN and "no input for 6." in st.message, st.message

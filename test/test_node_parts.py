@@ -23,7 +23,7 @@ from fcop_ros.ros.params import (
     descriptor,
 )
 from fcop_ros.ros.frame_estimate import FrameRefused, estimate_frame
-from fcop_ros.ros.intake import sync_step
+from fcop_ros.ros.intake import FLOWING_SECONDS, Intake
 from fcop_ros.ros.sync import StampSynchronizer
 from fcop_ros.ros.worker import LatestSlotWorker
 
@@ -119,42 +119,79 @@ SEC, FRAME_DT = 1_000_000_000, 33_333_333
 
 
 def _steps(sync, messages):
-    return [sync_step(sync, i, t, f"{INPUT_NAMES[i]}@{t}", INPUT_NAMES) for i, t in messages]
+    """Each (input, stamp[, arrival time s]) through one Intake; arrival defaults to the stamp."""
+    intake = Intake(sync, INPUT_NAMES)
+    return [intake.add(m[0], m[1], f"{INPUT_NAMES[m[0]]}@{m[1]}",
+                       m[2] if len(m) > 2 else m[1] / SEC) for m in messages]
 
 
-def test_sync_step_names_the_silent_input_when_a_queue_overflows():
+def _lines(steps, level=None):
+    return {key: text for st in steps for lv, key, text in st.log if level in (None, lv)}
+
+
+def test_intake_names_the_silent_input_and_queue_size_when_a_queue_overflows():
     steps = _steps(StampSynchronizer(3, queue_size=2),
                    [(0, 10 * SEC + k * FRAME_DT) for k in range(3)])
     assert [st.dropped for st in steps] == [{}, {}, {"sync_queue_full": 1}]
-    assert steps[2].warnings == (("sync_queue_full", (
+    assert steps[2].log == (("warn", "sync_queue_full", (
         "fcop_node: dropped 1 message(s) in the synchroniser: queue full (depth 1); nothing from "
-        "nocs and mask to match them (silent, or stamped far from the others?)")),)
+        "nocs and mask to match them: silent, or later than queue_size (2) messages of the "
+        "others (raise queue_size to cover that delay times their rate)")),)
     assert not any(st.sets or st.jumped for st in steps)
     assert [len(st.accepted) for st in steps] == [1, 1, 1]  # each passed the stamp check
 
 
-def test_sync_step_counts_an_outlier_stamp_per_input_and_says_where_the_clock_was():
-    messages = [(i, 0 if (i, k) == (2, 2) else 10 * SEC + k * FRAME_DT)
+def test_intake_counts_an_outlier_stamp_per_input_and_says_where_the_clock_was():
+    messages = [(i, 0 if (i, k) == (2, 2) else 10 * SEC + k * FRAME_DT, 10 + k / 30)
                 for k in range(5) for i in range(3)]
     steps = _steps(StampSynchronizer(3), messages)
     dropped = sum((st.dropped for st in steps), Counter())
     assert dropped == {"outlier_stamp_mask": 1, "sync_unmatched": 2}
-    lines = dict(w for st in steps for w in st.warnings)
-    assert lines["outlier_2"] == ("fcop_node: dropped 1 mask message(s) with an outlier stamp "
-                                  "(0.000 s; the mask stamps before were at 10.033 s)")
-    assert lines["sync_unmatched"].endswith("unmatched (depth 1, nocs 1)")
+    assert _lines(steps, "warn") == {"outlier_2": (
+        "fcop_node: dropped 1 mask message(s) with an outlier stamp (0.000 s; the mask stamps "
+        "before were at 10.033 s)")}
+    # Frames matched just before: the unmatched depth and NOCS of the outlier's frame are flow.
+    flow = _lines(steps, "info")["sync_flowing_unmatched"]
+    assert "unmatched messages (depth 1, nocs 1)" in flow
     assert sum(len(st.sets) for st in steps) == 4 and not any(st.jumped for st in steps)
 
 
-def test_sync_step_reports_a_jump_back_once_for_the_node_to_reset():
-    messages = [(i, t * SEC + k * FRAME_DT) for t in (10, 2) for k in range(4) for i in range(3)]
+def test_intake_reports_a_jump_back_once_for_the_node_to_reset():
+    messages = [(i, t * SEC + k * FRAME_DT, 20 + n / 10) for n, (t, k, i) in enumerate(
+        (t, k, i) for t in (10, 2) for k in range(4) for i in range(3))]
     steps = _steps(StampSynchronizer(3), messages)
     jumps = [n for n, st in enumerate(steps) if st.jumped]
-    assert len(jumps) == 1 and steps[jumps[0]].warnings == ((
-        "time_jump", "fcop_node: time jumped back (looped bag?): synchroniser and window reset"),)
+    assert len(jumps) == 1 and steps[jumps[0]].log == (("warn", "time_jump",
+        "fcop_node: time jumped back (looped bag?): synchroniser and window reset"),)
     # The held depth messages that confirmed the jump are released with it, then matched.
     assert [m[1] for m in steps[jumps[0]].accepted] == [2 * SEC + k * FRAME_DT for k in range(3)]
     assert sum(len(st.sets) for st in steps) == 8
+
+
+def test_intake_takes_a_slower_nocs_network_as_flow_and_warns_when_it_goes_silent():
+    """30 Hz depth; NOCS and mask for every 6th frame, 250 ms late, with its depth's stamp (a
+    hostile trial's robot): once frames match, the drops are said once at INFO; NOCS and mask
+    stopping after 10 s is a WARN naming them once no frame has matched for 5 s."""
+    events = []
+    for k in range(600):  # 20 s
+        events.append((k / 30, 0, k * FRAME_DT))
+        if k % 6 == 0 and k < 300:
+            events += [(k / 30 + 0.25, 1, k * FRAME_DT), (k / 30 + 0.25, 2, k * FRAME_DT)]
+    events.sort()
+    steps = _steps(StampSynchronizer(3, queue_size=10), [(i, t, now) for now, i, t in events])
+    matched_at = [e[0] for e, st in zip(events, steps) if st.sets]
+    assert len(matched_at) == 50 and matched_at[-1] < 10.3
+    # Five of six depth images never match: dropped as unmatched, or from the full queue while
+    # their frame's NOCS is on its way; after 10 s every depth image goes from the full queue.
+    assert sum((st.dropped for st in steps), Counter()) == {"sync_queue_full": 442,
+                                                            "sync_unmatched": 98}
+    said = [(e[0], lv, key) for e, st in zip(events, steps) for lv, key, _ in st.log]
+    assert [(lv, key) for _, lv, key in said if lv == "info"] == [
+        ("info", "sync_flowing_queue_full"), ("info", "sync_flowing_unmatched")]
+    warns = [(t, key) for t, lv, key in said if lv == "warn"]
+    assert warns and min(t for t, _ in warns) > matched_at[-1] + FLOWING_SECONDS
+    assert {key for _, key in warns} == {"sync_queue_full"}
+    assert "nothing from nocs and mask" in _lines(steps, "warn")["sync_queue_full"]
 
 
 # ----- one frame's messages to its estimate
@@ -420,9 +457,39 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
              "sync_dropped": 399, "rejected": {"sync_queue_full": 399}},
             Rates(5.0, 0, 0, 0),
             DiagnosticStatus.WARN,
-            "399 messages dropped from full queues: an input is silent or stamped further "
-            "behind the others than queue_size messages (raise queue_size)",
+            "399 messages dropped from full queues: an input is stamped further behind the "
+            "others than queue_size messages (raise queue_size to cover its delay times the "
+            "others' rate)",
         ),  # the same trial: NOCS and mask 300 ms late at 30 Hz, queue_size 5
+        (
+            {"sync_dropped": 900, "rejected": {"sync_queue_full": 800, "sync_unmatched": 100},
+             "input_ages": (("depth", 0.01), ("nocs", 6.2), ("mask", 6.2))},
+            Rates(5.0, 0, 0, 0, answered=150),
+            DiagnosticStatus.WARN,
+            "no matched depth, NOCS and mask set (no nocs message for 6.2 s and no mask message "
+            "for 6.2 s (silent, or its topic remapped elsewhere?))",
+        ),  # a hostile trial: a NOCS network at 5 Hz stopped; the lifetime drops (of a healthy
+        # slower input) said "raise queue_size"
+        (
+            {"age": 20.3, "input_ages": (("depth", 20.3), ("nocs", 20.4), ("mask", 20.4))},
+            Rates(5.0, 0, 0, 0),
+            DiagnosticStatus.WARN,
+            "focal 600.0 px from an estimate 20.3 s old: no input for 20.3 s (camera stopped, "
+            "or topics remapped?)",
+        ),  # the same trial: every input stopped, diagnostics said OK for 20 s
+        (
+            {"window": WindowEstimate(None, reason="no frames yet"),
+             "input_ages": (("depth", 0.02), ("nocs", None), ("mask", None))},
+            Rates(5.0, 0, 0, 0, answered=150),
+            DiagnosticStatus.WARN,
+            "no focal estimate yet: no frames yet",
+        ),  # never heard from nocs and mask: the depth came only now, not silent yet
+        (
+            {"input_ages": (("depth", 0.01), ("nocs", 0.15), ("mask", 0.15))},
+            QUIET,
+            DiagnosticStatus.OK,
+            "focal 600.0 px",
+        ),  # a slower NOCS network, matching
         (
             {"sync_dropped": 40, "rejected": {"sync_unmatched": 40}},
             Rates(5.0, 0, 0, 0, answered=150),

@@ -17,6 +17,8 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from .gate import held_back
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+#: An input that sent nothing for this long (seconds) is called silent.
+SILENT_SECONDS = 5.0
 
 
 @dataclass(frozen=True)
@@ -54,6 +56,8 @@ class DiagnosticsInput:
     # Why no CameraInfo can be built for the images the publishable focal belongs to (a
     # camera_info_in of another size, a principal point off the image); "" if it can.
     no_camera_info: str = ""
+    # (input name, seconds since its last message, None before the first) for each image input.
+    input_ages: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -104,7 +108,8 @@ class RateWindow:
 
 def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     """(level, message, {key: value}) of the node's status: ERROR when the estimator is stalled,
-    WARN without a focal (saying so while the kernels are being prepared), with one held back by
+    WARN without a focal (saying so while the kernels are being prepared), when every input has
+    been silent for SILENT_SECONDS (the camera stopped), with one held back by
     focal_range (changed at run time) or max_uncertainty, or for which no CameraInfo can be
     built (camera_info_in of another size than the images), when depth images keep coming but no
     complete frame has matched lately (the estimate ages), or when the estimator skipped more
@@ -114,6 +119,7 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     else OK."""
     win = d.window
     std = getattr(win, "std_rel", None)
+    silent = _silent(d)
     if d.busy_for is not None and d.busy_for > d.max_estimate_age:
         level = ERROR
         message = (
@@ -129,7 +135,11 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         if d.last_reason:
             message += f"; the newest frame: {d.last_reason}"
         if d.matched == 0 and d.sync_dropped > 0:
-            message += f"; no depth, NOCS and mask set has matched: {_sync_hint(d.rejected)}"
+            message += f"; no depth, NOCS and mask set has matched: {_sync_hint(d)}"
+    elif silent and len(silent) == len(d.input_ages):
+        level = WARN
+        message = (f"focal {win.focal:.1f} px from an estimate {d.age or 0:.1f} s old: no input "
+                   f"for {min(a for _, a in silent):.1f} s (camera stopped, or topics remapped?)")
     elif not d.publishable:
         level = WARN
         message = (held_back(win, d.max_uncertainty, d.focal_range)
@@ -142,7 +152,7 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         message = (
             f"focal {win.focal:.1f} px from an ageing estimate: {rates.answered} depth images "
             f"in the last {rates.span:.1f} s but no matched depth, NOCS and mask set "
-            f"({_sync_hint(d.rejected)})"
+            f"({_sync_hint(d)})"
         )
     elif rates.refused >= 5 and 2 * rates.refused > rates.processed:
         level = WARN
@@ -179,22 +189,40 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         "processing_ms_max": f"{np.max(times):.2f}",
         "estimator_kernels": d.kernels,
     }
+    values.update({f"{name}_age_s": "" if age is None else f"{age:.2f}"
+                   for name, age in d.input_ages})
     values.update({f"rejected_{k}": str(v) for k, v in sorted(d.rejected.items())})
     values.update({f"warning_{k}": str(v) for k, v in sorted(d.warnings.items())})
     return level, message, values
 
 
-def _sync_hint(rejected: dict) -> str:
-    """What the synchroniser's drops (counted as rejected 'sync_<reason>') say about inputs that
-    do not match, and the parameter that answers it."""
-    unmatched = rejected.get("sync_unmatched", 0)
-    full = rejected.get("sync_queue_full", 0)
+def _silent(d: DiagnosticsInput) -> list:
+    """(name, seconds) of the inputs silent for SILENT_SECONDS or more (one that never sent is
+    silent since the first message of another)."""
+    heard = [age for _, age in d.input_ages if age is not None]
+    if not heard:
+        return []
+    since_first = max(heard)
+    return [(name, since_first if age is None else age) for name, age in d.input_ages
+            if (since_first if age is None else age) >= SILENT_SECONDS]
+
+
+def _sync_hint(d: DiagnosticsInput) -> str:
+    """Why depth, NOCS and mask do not match, and the parameter that answers it: an input silent
+    now, else what the synchroniser's drops (counted as rejected 'sync_<reason>') say."""
+    silent = _silent(d)
+    if silent and len(silent) < len(d.input_ages):
+        return " and ".join(f"no {name} message for {age:.1f} s" for name, age in silent) + (
+            " (silent, or its topic remapped elsewhere?)")
+    unmatched = d.rejected.get("sync_unmatched", 0)
+    full = d.rejected.get("sync_queue_full", 0)
     if unmatched >= full and unmatched:
         return (f"{unmatched} messages dropped as unmatched: the inputs' stamps differ (exact "
                 "sync needs equal stamps; sync_mode approximate matches within sync_slop)")
     if full:
-        return (f"{full} messages dropped from full queues: an input is silent or stamped "
-                "further behind the others than queue_size messages (raise queue_size)")
+        return (f"{full} messages dropped from full queues: an input is stamped further "
+                "behind the others than queue_size messages (raise queue_size to cover its "
+                "delay times the others' rate)")
     return "is the NOCS or mask topic silent?"
 
 

@@ -1,10 +1,14 @@
-"""What one input message does at the synchroniser, in the node's words: plain Python, no rclpy.
+"""What each input message does at the synchroniser, in the node's words: plain Python, no rclpy.
 
-The node's image callback hands each message to :func:`sync_step`, which adds it to the
+The node's image callback hands each message to :meth:`Intake.add`, which adds it to the
 :class:`~fcop_ros.ros.sync.StampSynchronizer` and reports the frames it completed, the messages
 that passed the stamp check, whether time jumped back, the drops to count (under the names the
 node's ``rejected`` counter and /diagnostics use) and the log lines that explain them. The node
 only applies that: it resets on a jump, hands the frames on, counts and logs (throttled).
+
+Drops while frames keep matching are how inputs of different rates meet (30 Hz depth with a
+5 Hz NOCS network leaves five of six depth images unmatched): said once, at INFO. Drops with
+no frame matched for :data:`FLOWING_SECONDS` are a WARN that names what is missing.
 """
 from __future__ import annotations
 
@@ -13,6 +17,9 @@ from dataclasses import dataclass
 
 from .sync import StampSynchronizer
 
+#: A set matched this recently (seconds) means frames are flowing.
+FLOWING_SECONDS = 5.0
+
 
 @dataclass(frozen=True)
 class SyncStep:
@@ -20,55 +27,77 @@ class SyncStep:
     ``accepted`` (input index, stamp, message) that passed the stamp check (held ones released
     with it included); ``jumped``: time jumped back and the synchroniser started again (the focal
     window must too, before the sets reach it); ``dropped``: reason -> messages dropped;
-    ``warnings``: (throttle key, log line) explaining those drops."""
+    ``log``: (level 'warn' or 'info', throttle key, line) explaining those drops."""
 
     sets: list
     accepted: list
     jumped: bool
     dropped: Counter
-    warnings: tuple
+    log: tuple
 
 
 def _sec(stamp) -> str:
     return "none" if stamp is None else f"{stamp / 1e9:.3f} s"
 
 
-def sync_step(sync: StampSynchronizer, index: int, stamp: int, msg, inputs) -> SyncStep:
-    """Add ``msg`` (input ``index`` of the names ``inputs``, stamped ``stamp`` ns) to ``sync``."""
-    stats = sync.stats
-    before, before_inputs, resets = Counter(stats.dropped), Counter(stats.per_input), stats.resets
-    sets = sync.add(index, stamp, msg)
-    new_drops = stats.dropped - before
-    new_inputs = stats.per_input - before_inputs
-    jumped = stats.resets != resets
-    dropped, warnings = Counter(), []
-    for i, stamps, ref in sync.outliers_dropped:
-        dropped[f"outlier_stamp_{inputs[i]}"] += len(stamps)
-        warnings.append((
-            f"outlier_{i}",
-            f"fcop_node: dropped {len(stamps)} {inputs[i]} message(s) with an outlier stamp "
-            f"({', '.join(_sec(s) for s in stamps)}; the {inputs[i]} stamps before were at "
-            f"{_sec(ref)})",
-        ))
-    if jumped:
-        warnings.append(("time_jump", "fcop_node: time jumped back (looped bag?): synchroniser "
-                                      "and window reset"))
-    waiting = sync.waiting_for()
-    for reason, n in new_drops.items():
-        if reason == "outlier_stamp":  # counted per input above
-            continue
-        dropped["sync_" + reason] += n
-        if reason == "time_jump_reset":  # said by the time_jump line
-            continue
-        which = ", ".join(
-            f"{inputs[i]} {k}" for (r, i), k in sorted(new_inputs.items()) if r == reason)
-        silent = ""
-        if reason == "queue_full" and waiting:
-            silent = (f"; nothing from {' and '.join(inputs[i] for i in waiting)} to match them "
-                      "(silent, or stamped far from the others?)")
-        warnings.append((
-            "sync_" + reason,
-            f"fcop_node: dropped {n} message(s) in the synchroniser: "
-            f"{reason.replace('_', ' ')} ({which}){silent}",
-        ))
-    return SyncStep(sets, list(sync.accepted), jumped, dropped, tuple(warnings))
+class Intake:
+    """A StampSynchronizer (``sync``) for the inputs named ``inputs``, and what its drops mean."""
+
+    def __init__(self, sync: StampSynchronizer, inputs):
+        self.sync = sync
+        self.inputs = tuple(inputs)
+        self._last_match: float | None = None  # clock time of the last matched set
+        self._said_flowing: set = set()  # drop reasons said at INFO since their last WARN
+
+    def add(self, index: int, stamp: int, msg, now: float) -> SyncStep:
+        """Add ``msg`` (input ``index``, stamped ``stamp`` ns) at clock time ``now`` (s)."""
+        sync, inputs, stats = self.sync, self.inputs, self.sync.stats
+        before, before_inputs = Counter(stats.dropped), Counter(stats.per_input)
+        resets = stats.resets
+        sets = sync.add(index, stamp, msg)
+        if sets:
+            self._last_match = now
+        new_drops = stats.dropped - before
+        new_inputs = stats.per_input - before_inputs
+        jumped = stats.resets != resets
+        dropped, log = Counter(), []
+        for i, stamps, ref in sync.outliers_dropped:
+            dropped[f"outlier_stamp_{inputs[i]}"] += len(stamps)
+            log.append(("warn", f"outlier_{i}",
+                        f"fcop_node: dropped {len(stamps)} {inputs[i]} message(s) with an outlier "
+                        f"stamp ({', '.join(_sec(s) for s in stamps)}; the {inputs[i]} stamps "
+                        f"before were at {_sec(ref)})"))
+        if jumped:
+            log.append(("warn", "time_jump", "fcop_node: time jumped back (looped bag?): "
+                                             "synchroniser and window reset"))
+        flowing = self._last_match is not None and now - self._last_match <= FLOWING_SECONDS
+        waiting = sync.waiting_for()
+        for reason, n in new_drops.items():
+            if reason == "outlier_stamp":  # counted per input above
+                continue
+            dropped["sync_" + reason] += n
+            if reason == "time_jump_reset":  # said by the time_jump line
+                continue
+            which = ", ".join(
+                f"{inputs[i]} {k}" for (r, i), k in sorted(new_inputs.items()) if r == reason)
+            if flowing and reason in ("unmatched", "queue_full"):
+                if reason not in self._said_flowing:
+                    self._said_flowing.add(reason)
+                    log.append(("info", "sync_flowing_" + reason, (
+                        f"fcop_node: {reason.replace('_', ' ')} messages ({which}) dropped in "
+                        "the synchroniser while frames keep matching: expected where an input "
+                        "comes at a lower rate than the others (e.g. a NOCS network slower than "
+                        "the camera); counted in /diagnostics, said again only if no frame "
+                        f"matches for {FLOWING_SECONDS:.0f} s")))
+                continue
+            self._said_flowing.discard(reason)
+            hint = ""
+            if reason == "queue_full" and waiting:
+                silent = " and ".join(inputs[i] for i in waiting)
+                hint = (f"; nothing from {silent} to match them: silent, or later than "
+                        f"queue_size ({sync.queue_size}) messages of the others (raise "
+                        "queue_size to cover that delay times their rate)")
+            log.append(("warn", "sync_" + reason,
+                        f"fcop_node: dropped {n} message(s) in the synchroniser: "
+                        f"{reason.replace('_', ' ')} ({which}){hint}"))
+        return SyncStep(sets, list(sync.accepted), jumped, dropped, tuple(log))

@@ -46,7 +46,7 @@ from .calibration import default_calibration_path, write_calibration
 from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
 from .frame_estimate import FrameRefused, estimate_frame
-from .intake import sync_step
+from .intake import Intake
 from .intrinsics import IntrinsicsRefused, camera_info_with, intrinsics
 from .params import (
     ESTIMATOR_PARAMETERS,
@@ -164,7 +164,8 @@ class FcopNode(Node):
         self._cam_in: CameraInfo | None = None
         self._warned_distortion = False
         self._rng = np.random.default_rng(None if self.p["seed"] < 0 else int(self.p["seed"]))
-        self.sync = self._new_sync()
+        self.intake = Intake(self._new_sync(), INPUTS)
+        self._input_seen: list = [None] * len(INPUTS)  # clock time of each input's last message
         self.estimator_options = estimator_options(self.p)
         # The window, the image size it holds and the publish gate; under self._lock.
         self.tracker = FocalTracker(
@@ -346,6 +347,11 @@ class FcopNode(Node):
         return StampSynchronizer(len(INPUTS), *sync_settings(self.p))
 
     @property
+    def sync(self) -> StampSynchronizer:
+        """The stamp synchroniser of the three inputs (under the node's lock)."""
+        return self.intake.sync
+
+    @property
     def window(self):
         """The FocalWindow (read it under the node's lock, or through window_estimate)."""
         return self.tracker.window
@@ -383,7 +389,9 @@ class FcopNode(Node):
     def _on_image(self, index: int, msg: Image) -> None:
         with self._lock:
             self.received += 1
-            step = sync_step(self.sync, index, stamp_ns(msg), msg, INPUTS)
+            now = self._now()
+            self._input_seen[index] = now
+            step = self.intake.add(index, stamp_ns(msg), msg, now)
             if step.jumped:  # before the new frames reach the worker
                 self._reset_locked()
             self.rejected.update(step.dropped)
@@ -396,8 +404,8 @@ class FcopNode(Node):
         for i, stamp, m in step.accepted:
             if i == 0:
                 self._answer_depth(stamp, m)
-        for key, text in step.warnings:
-            self._throttle.warn(key, text)
+        for level, key, text in step.log:
+            (self._throttle.warn if level == "warn" else self._throttle.info)(key, text)
 
     def _hand_off(self, sets) -> None:
         """Give the worker each matched frame (under self._lock); a frame it had not taken yet
@@ -769,6 +777,8 @@ class FcopNode(Node):
                 warming_up=self._warming_up,
                 last_reason=self._newest_refusal,
                 no_camera_info=no_camera_info,
+                input_ages=tuple((name, None if t is None else now - t)
+                                 for name, t in zip(INPUTS, self._input_seen)),
             )
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped,
                                 reading.camera_info_published, self._no_focal_frames)

@@ -111,7 +111,10 @@ PARAMETERS: dict[str, ParamSpec] = {
         range=(0.0, 1.0),
     ),
     "queue_size": ParamSpec(
-        5, "Messages per input waiting in the synchroniser for the other inputs.", range=(1, 100)
+        5,
+        "Messages per input waiting in the synchroniser for the other inputs: more than the "
+        "latest input's delay behind the others times their rate.",
+        range=(1, 100),
     ),
     "publish_poses": ParamSpec(True, "Publish object_poses (geometry_msgs/PoseArray)."),
     "publish_markers": ParamSpec(True, "Publish object_markers (visualization_msgs/MarkerArray)."),
