@@ -22,7 +22,8 @@ from fcop_ros.ros.params import (
     defaults,
     descriptor,
 )
-from fcop_ros.ros.frame_estimate import FrameRefused, estimate_frame
+from fcop_ros.ros.frame_estimate import estimate_frame
+from fcop_ros.ros.intrinsics import Refused
 from fcop_ros.ros.intake import FLOWING_SECONDS, Intake
 from fcop_ros.ros.sync import StampSynchronizer
 from fcop_ros.ros.worker import LatestSlotWorker
@@ -227,7 +228,7 @@ def test_estimate_frame_is_the_core_estimate_of_the_images_and_names_what_it_ref
              (msgs, other, "camera_info_size_mismatch")]
     rng = np.random.default_rng(0)
     for frame_msgs, info, reason in cases:
-        with pytest.raises(FrameRefused) as refused:
+        with pytest.raises(Refused) as refused:
             estimate_frame(frame_msgs, p, info, opts, rng)
         assert refused.value.reason == reason and str(refused.value)
     assert rng.integers(2**31) == np.random.default_rng(0).integers(2**31)  # no draw spent

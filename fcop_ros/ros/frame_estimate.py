@@ -9,16 +9,11 @@ from dataclasses import dataclass
 from msg_adapters import ImageFormatError, ImageSizeMismatch, frame_from_images
 
 from ..core import FocalEstimate, estimate_focal
-from .intrinsics import IntrinsicsRefused, intrinsics
+from .intrinsics import Refused, intrinsics
 
 
-class FrameRefused(Exception):
-    """A frame the estimator cannot use: ``reason`` is the node's drop counter, the text says
-    why."""
-
-    def __init__(self, reason: str, text: str):
-        super().__init__(text)
-        self.reason = reason
+class FrameRefused(Refused):
+    """Images of a frame the estimator cannot read (encoding, size)."""
 
 
 @dataclass(frozen=True)
@@ -33,7 +28,8 @@ def estimate_frame(msgs, params: dict, camera_info_in, options, rng) -> FrameEst
     """Estimate the focal length of one (depth, nocs, mask) message set under the node's
     parameter values ``params`` and estimator ``options``, its triplets seeded from ``rng`` (a
     numpy Generator, drawn only for a frame that is estimated); FrameRefused for images of the
-    wrong encoding or size, or whose principal point cannot be had (see :func:`.intrinsics`)."""
+    wrong encoding or size, IntrinsicsRefused where no principal point can be had (both are
+    :class:`.intrinsics.Refused`)."""
     try:
         depth, nocs, mask = frame_from_images(
             *msgs, params["depth_scale"], params["nocs_convention"])
@@ -42,10 +38,7 @@ def estimate_frame(msgs, params: dict, camera_info_in, options, rng) -> FrameEst
     except ImageFormatError as exc:
         raise FrameRefused("bad_encoding", str(exc)) from None
     h, w = depth.shape
-    try:
-        intr = intrinsics(params, camera_info_in, w, h)
-    except IntrinsicsRefused as exc:
-        raise FrameRefused(exc.reason, str(exc)) from None
+    intr = intrinsics(params, camera_info_in, w, h)
     est = estimate_focal(depth, nocs, mask, (intr.cx, intr.cy), options=options, poses=False,
                          seed=int(rng.integers(2**31)))
     return FrameEstimate(est, (w, h))

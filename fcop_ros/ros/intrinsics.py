@@ -13,12 +13,16 @@ from msg_adapters import camera_info
 from ..core.camera import image_centre, inside_image
 
 
-class IntrinsicsRefused(Exception):
-    """No CameraInfo for these images: ``reason`` is the drop counter's key, the text says why."""
+class Refused(Exception):
+    """Input the node cannot use: ``reason`` is the drop counter's key, the text says why."""
 
     def __init__(self, reason: str, text: str):
         super().__init__(text)
         self.reason = reason
+
+
+class IntrinsicsRefused(Refused):
+    """No CameraInfo for these images."""
 
 
 @dataclass(frozen=True)

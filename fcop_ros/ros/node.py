@@ -45,9 +45,9 @@ from .answers import DepthAnswers
 from .calibration import default_calibration_path, write_calibration
 from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
-from .frame_estimate import FrameRefused, estimate_frame
+from .frame_estimate import estimate_frame
 from .intake import Intake
-from .intrinsics import IntrinsicsRefused, camera_info_with, intrinsics
+from .intrinsics import IntrinsicsRefused, Refused, camera_info_with, intrinsics
 from .params import (
     ESTIMATOR_PARAMETERS,
     GATE_PARAMETERS,
@@ -597,7 +597,7 @@ class FcopNode(Node):
             camera_info_in = self._cam_in
         try:
             frame = estimate_frame(msgs, p, camera_info_in, self.estimator_options, self._rng)
-        except FrameRefused as exc:
+        except Refused as exc:
             return self._refuse_frame(exc.reason, str(exc))
         est, (w, h) = frame.estimate, frame.size
         if est.mirrored:
