@@ -148,13 +148,36 @@ def test_intake_counts_an_outlier_stamp_per_input_and_says_where_the_clock_was()
     steps = _steps(StampSynchronizer(3), messages)
     dropped = sum((st.dropped for st in steps), Counter())
     assert dropped == {"outlier_stamp_mask": 1, "sync_unmatched": 2}
-    assert _lines(steps, "warn") == {"outlier_2": (
-        "fcop_node: dropped 1 mask message(s) with an outlier stamp (0.000 s; the mask stamps "
-        "before were at 10.033 s)")}
-    # Frames matched just before: the unmatched depth and NOCS of the outlier's frame are flow.
-    flow = _lines(steps, "info")["sync_flowing_unmatched"]
-    assert "unmatched messages (depth 1, nocs 1)" in flow
+    # Inputs of one rate: the depth and NOCS left without their mask are a lost frame, though
+    # frames matched just before.
+    assert _lines(steps, "warn") == {
+        "outlier_2": ("fcop_node: dropped 1 mask message(s) with an outlier stamp (0.000 s; the "
+                      "mask stamps before were at 10.033 s)"),
+        "sync_unmatched": ("fcop_node: dropped 2 message(s) in the synchroniser: unmatched "
+                           "(depth 1, nocs 1)")}
+    assert not _lines(steps, "info")
     assert sum(len(st.sets) for st in steps) == 4 and not any(st.jumped for st in steps)
+
+
+def test_intake_warns_when_the_slowest_input_is_the_one_dropped_while_frames_match():
+    """The re-run trial: NOCS and mask 265 ms late with queue_size 8: 33 of 125 NOCS frames
+    matched, and the lost NOCS were said once at INFO as expected flow. Every message of the
+    slowest input should make a frame: its drops are a WARN."""
+    events = []
+    for k in range(300):  # 10 s
+        events.append((k / 30, 0, k * FRAME_DT))
+        if k % 6 == 0:  # the network's delay varies: 250 or 300 ms
+            late = k / 30 + (0.25 if k % 12 else 0.30)
+            events += [(late, 1, k * FRAME_DT), (late, 2, k * FRAME_DT)]
+    events.sort()
+    steps = _steps(StampSynchronizer(3, queue_size=8), [(i, t, now) for now, i, t in events])
+    assert sum(len(st.sets) for st in steps) == 25  # those 250 ms late
+    first = next(n for n, st in enumerate(steps) if st.sets)  # frames flow from here on
+    warned = " ".join(text for st in steps[first + 1:] for lv, key, text in st.log
+                      if (lv, key) == ("warn", "sync_unmatched"))
+    assert "unmatched (nocs 1)" in warned and "unmatched (mask 1)" in warned
+    flow = " ".join(_lines(steps, "info").values())  # the faster depth's drops only
+    assert "(depth " in flow and "nocs" not in flow.split("(e.g.")[0]
 
 
 def test_intake_reports_a_jump_back_once_for_the_node_to_reset():
@@ -468,7 +491,7 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             Rates(5.0, 0, 0, 0, answered=150),
             DiagnosticStatus.WARN,
             "no matched depth, NOCS and mask set (no nocs message for 6.2 s and no mask message "
-            "for 6.2 s (silent, or its topic remapped elsewhere?))",
+            "for 6.2 s (silent, or their topics remapped elsewhere?))",
         ),  # a hostile trial: a NOCS network at 5 Hz stopped; the lifetime drops (of a healthy
         # slower input) said "raise queue_size"
         (
@@ -487,10 +510,18 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
         ),  # never heard from nocs and mask: the depth came only now, not silent yet
         (
             {"input_ages": (("depth", 0.01), ("nocs", 0.15), ("mask", 0.15))},
-            QUIET,
+            Rates(5.0, 25, 25, 0, answered=150, inputs=(150, 25, 25)),
             DiagnosticStatus.OK,
             "focal 600.0 px",
         ),  # a slower NOCS network, matching
+        (
+            {"input_ages": (("depth", 0.01), ("nocs", 0.15), ("mask", 0.15)),
+             "sync_dropped": 900, "rejected": {"sync_queue_full": 700, "sync_unmatched": 200}},
+            Rates(5.0, 7, 7, 0, answered=150, inputs=(150, 25, 25)),
+            DiagnosticStatus.WARN,
+            "focal 600.0 px from few frames: only 7 of the 25 nocs messages in the last 5.0 s "
+            "made a frame (700 messages dropped from full queues",
+        ),  # the re-run trial: NOCS 265 ms late with queue_size 8; 33 of 125 matched, OK said
         (
             {"sync_dropped": 40, "rejected": {"sync_unmatched": 40}},
             Rates(5.0, 0, 0, 0, answered=150),
@@ -523,8 +554,9 @@ def test_rate_window_spans_back_to_the_newest_reading_at_least_five_seconds_old(
     # From the node's start, the first reading has rates (it read 0.00 Hz before); the second
     # is taken against the first, as before.
     rw = RateWindow(5.0, start=10.0)
-    assert rw.add(11.0, 30, 30, 0).frame_hz == 30.0
-    assert rw.add(12.0, 90, 90, 0).frame_hz == 60.0
+    assert rw.add(11.0, 30, 30, 0, inputs=(30, 5, 5)).frame_hz == 30.0
+    r = rw.add(12.0, 90, 90, 0, inputs=(90, 15, 15))
+    assert r.frame_hz == 60.0 and r.inputs == (60, 10, 10)  # each input's messages, alike
 
 
 # ----- the DDS environment

@@ -64,7 +64,8 @@ class DiagnosticsInput:
 class Rates:
     """Frames matched, processed and skipped over the last ``span`` seconds, and their rates;
     ``answered``: depth images given a CameraInfo in that time; ``refused``: frames the
-    estimator took that gave no focal in that time (input it refused, or no evidence)."""
+    estimator took that gave no focal in that time (input it refused, or no evidence);
+    ``inputs``: messages of each image input in that time."""
 
     span: float
     matched: int
@@ -72,6 +73,7 @@ class Rates:
     skipped: int
     answered: int = 0
     refused: int = 0
+    inputs: tuple = ()
 
     @property
     def frame_hz(self) -> float:
@@ -94,22 +96,24 @@ class RateWindow:
         self._start = start
 
     def add(self, now: float, matched: int, processed: int, skipped: int,
-            answered: int = 0, refused: int = 0) -> Rates:
-        self._samples.append((now, matched, processed, skipped, answered, refused))
+            answered: int = 0, refused: int = 0, inputs: tuple = ()) -> Rates:
+        inputs = tuple(inputs)
+        self._samples.append((now, matched, processed, skipped, answered, refused, inputs))
         while len(self._samples) > 1 and now - self._samples[1][0] >= self.seconds:
             self._samples.popleft()
         first = self._samples[0]
         if len(self._samples) == 1 and self._start is not None and self._start < now:
-            first = (self._start, 0, 0, 0, 0, 0)
-        t0, m0, p0, s0, a0, r0 = first
+            first = (self._start, 0, 0, 0, 0, 0, (0,) * len(inputs))
+        t0, m0, p0, s0, a0, r0, i0 = first
         return Rates(now - t0, matched - m0, processed - p0, skipped - s0, answered - a0,
-                     refused - r0)
+                     refused - r0, tuple(a - b for a, b in zip(inputs, i0)))
 
 
 def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     """(level, message, {key: value}) of the node's status: ERROR when the estimator is stalled,
     WARN without a focal (saying so while the kernels are being prepared), when every input has
-    been silent for SILENT_SECONDS (the camera stopped), with one held back by
+    been silent for SILENT_SECONDS (the camera stopped), when fewer than half of the slowest
+    input's recent messages made a frame, with one held back by
     focal_range (changed at run time) or max_uncertainty, or for which no CameraInfo can be
     built (camera_info_in of another size than the images), when depth images keep coming but no
     complete frame has matched lately (the estimate ages), or when the estimator skipped more
@@ -120,6 +124,7 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     win = d.window
     std = getattr(win, "std_rel", None)
     silent = _silent(d)
+    lost = _slowest_lost(d, rates)
     if d.busy_for is not None and d.busy_for > d.max_estimate_age:
         level = ERROR
         message = (
@@ -153,6 +158,13 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
             f"focal {win.focal:.1f} px from an ageing estimate: {rates.answered} depth images "
             f"in the last {rates.span:.1f} s but no matched depth, NOCS and mask set "
             f"({_sync_hint(d)})"
+        )
+    elif lost:
+        level = WARN
+        name, sent = lost
+        message = (
+            f"focal {win.focal:.1f} px from few frames: only {rates.matched} of the {sent} "
+            f"{name} messages in the last {rates.span:.1f} s made a frame ({_sync_hint(d)})"
         )
     elif rates.refused >= 5 and 2 * rates.refused > rates.processed:
         level = WARN
@@ -207,13 +219,27 @@ def _silent(d: DiagnosticsInput) -> list:
             if (since_first if age is None else age) >= SILENT_SECONDS]
 
 
+def _slowest_lost(d: DiagnosticsInput, rates: Rates):
+    """(name, messages) of the input that sent fewest messages lately, when five or more of them
+    and fewer than half made a frame (each should: it is the one the others wait for), else
+    None."""
+    if not rates.inputs or len(rates.inputs) != len(d.input_ages):
+        return None
+    k = min(range(len(rates.inputs)), key=rates.inputs.__getitem__)
+    sent = rates.inputs[k]
+    if sent >= 5 and 2 * rates.matched < sent:
+        return d.input_ages[k][0], sent
+    return None
+
+
 def _sync_hint(d: DiagnosticsInput) -> str:
     """Why depth, NOCS and mask do not match, and the parameter that answers it: an input silent
     now, else what the synchroniser's drops (counted as rejected 'sync_<reason>') say."""
     silent = _silent(d)
     if silent and len(silent) < len(d.input_ages):
         return " and ".join(f"no {name} message for {age:.1f} s" for name, age in silent) + (
-            " (silent, or its topic remapped elsewhere?)")
+            " (silent, or " + ("its topic" if len(silent) == 1 else "their topics")
+            + " remapped elsewhere?)")
     unmatched = d.rejected.get("sync_unmatched", 0)
     full = d.rejected.get("sync_queue_full", 0)
     if unmatched >= full and unmatched:

@@ -6,9 +6,10 @@ that passed the stamp check, whether time jumped back, the drops to count (under
 node's ``rejected`` counter and /diagnostics use) and the log lines that explain them. The node
 only applies that: it resets on a jump, hands the frames on, counts and logs (throttled).
 
-Drops while frames keep matching are how inputs of different rates meet (30 Hz depth with a
-5 Hz NOCS network leaves five of six depth images unmatched): said once, at INFO. Drops with
-no frame matched for :data:`FLOWING_SECONDS` are a WARN that names what is missing.
+Drops of a faster input while frames keep matching are how inputs of different rates meet
+(30 Hz depth with a 5 Hz NOCS network leaves five of six depth images unmatched): said once, at
+INFO. Drops of the slowest input (each of its messages should make a frame), or with no frame
+matched for :data:`FLOWING_SECONDS`, are a WARN that names what is missing.
 """
 from __future__ import annotations
 
@@ -19,6 +20,8 @@ from .sync import StampSynchronizer
 
 #: A set matched this recently (seconds) means frames are flowing.
 FLOWING_SECONDS = 5.0
+#: An input that sent this many times the messages of the slowest one is a faster input.
+FASTER = 1.5
 
 
 @dataclass(frozen=True)
@@ -48,10 +51,12 @@ class Intake:
         self.inputs = tuple(inputs)
         self._last_match: float | None = None  # clock time of the last matched set
         self._said_flowing: set = set()  # drop reasons said at INFO since their last WARN
+        self.received = [0] * len(self.inputs)  # messages per input
 
     def add(self, index: int, stamp: int, msg, now: float) -> SyncStep:
         """Add ``msg`` (input ``index``, stamped ``stamp`` ns) at clock time ``now`` (s)."""
         sync, inputs, stats = self.sync, self.inputs, self.sync.stats
+        self.received[index] += 1
         before, before_inputs = Counter(stats.dropped), Counter(stats.per_input)
         resets = stats.resets
         sets = sync.add(index, stamp, msg)
@@ -71,6 +76,7 @@ class Intake:
             log.append(("warn", "time_jump", "fcop_node: time jumped back (looped bag?): "
                                              "synchroniser and window reset"))
         flowing = self._last_match is not None and now - self._last_match <= FLOWING_SECONDS
+        slowest = min(self.received)
         waiting = sync.waiting_for()
         for reason, n in new_drops.items():
             if reason == "outlier_stamp":  # counted per input above
@@ -78,9 +84,10 @@ class Intake:
             dropped["sync_" + reason] += n
             if reason == "time_jump_reset":  # said by the time_jump line
                 continue
-            which = ", ".join(
-                f"{inputs[i]} {k}" for (r, i), k in sorted(new_inputs.items()) if r == reason)
-            if flowing and reason in ("unmatched", "queue_full"):
+            mine = sorted((i, k) for (r, i), k in new_inputs.items() if r == reason)
+            which = ", ".join(f"{inputs[i]} {k}" for i, k in mine)
+            faster = all(self.received[i] >= FASTER * slowest for i, _ in mine)
+            if flowing and faster and reason in ("unmatched", "queue_full"):
                 if reason not in self._said_flowing:
                     self._said_flowing.add(reason)
                     log.append(("info", "sync_flowing_" + reason, (

@@ -780,8 +780,9 @@ class FcopNode(Node):
                 input_ages=tuple((name, None if t is None else now - t)
                                  for name, t in zip(INPUTS, self._input_seen)),
             )
+            inputs = tuple(self.intake.received)
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped,
-                                reading.camera_info_published, self._no_focal_frames)
+                                reading.camera_info_published, self._no_focal_frames, inputs)
         return diagnostic_status(
             f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading, rates
         )
