@@ -245,6 +245,20 @@ def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, 
     return out
 
 
+#: An object whose fitted tilt is this many times the median of the frame's (three or more)
+#: is left out of the frame's depth-field curvature: its tilt is its own (a partial view, a
+#: wrong fit), as a smooth field tilts neighbouring objects alike.
+WILD_TILT = 5.0
+
+
+def _field_tilts(tilt, good):
+    """The objects whose tilts measure the frame's depth field: ``good`` less wild ones."""
+    norms = np.linalg.norm(tilt, axis=1)
+    if good.sum() < 3:
+        return good
+    return good & ~(norms > WILD_TILT * np.median(norms[good]))
+
+
 def object_variances(support, fits: ObjectFits, good, spread, raw_spread, relief_lean,
                      options):
     """Per object (O,): the fit's variance of log f plus the systematic terms.
@@ -254,12 +268,14 @@ def object_variances(support, fits: ObjectFits, good, spread, raw_spread, relief
     calibrated / raw NOCS from their centroid; relief_lean: each object's d log f per unit of
     relief error (:func:`depth_influence`'s first column). Terms, in log f: a smooth depth-error
     field's curvature, taken as ``unseen_depth_error`` times the rms of the fitted tilts over
-    the frame's objects, changes an object's relief by about that times z, so its log f by that
-    times z / relief times the relief derivative; ``shape_error`` times the square root of the
+    the frame's objects (less any tilted WILD_TILT times their median), changes an object's
+    relief by about that times z, so its log f by that times z / relief times the relief
+    derivative; ``shape_error`` times the square root of the
     shape share the similarity leaves unexplained, not counting the share that the measured
     depth and NOCS noise alone would leave.
     """
-    curvature = options.unseen_depth_error * np.sqrt(np.mean(fits.tilt[good] ** 2))
+    field = _field_tilts(fits.tilt, good)
+    curvature = options.unseen_depth_error * np.sqrt(np.mean(fits.tilt[field] ** 2))
     unseen = curvature * fits.translation[:, 2] / np.maximum(fits.relief, 1e-9)
     var = fits.var_log_focal + (unseen * relief_lean) ** 2
     # Noise shares of the 3D points' and the NOCS' variance, which lower the fit's quality even
