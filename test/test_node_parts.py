@@ -180,6 +180,27 @@ def test_intake_warns_when_the_slowest_input_is_the_one_dropped_while_frames_mat
     assert "(depth " in flow and "nocs" not in flow.split("(e.g.")[0]
 
 
+def test_intake_measures_the_late_inputs_delay_and_says_the_queue_size_it_needs():
+    """NOCS and mask 250 ms after their 30 Hz depth with the default queue_size 5: nothing can
+    match, and the WARN says how large queue_size must be, once a late NOCS has come."""
+    events = []
+    for k in range(60):
+        events.append((k / 30, 0, k * FRAME_DT))
+        if k % 6 == 0:
+            events += [(k / 30 + 0.25, 1, k * FRAME_DT), (k / 30 + 0.25, 2, k * FRAME_DT)]
+    events.sort()
+    intake = Intake(StampSynchronizer(3, queue_size=5), INPUT_NAMES)
+    steps = [intake.add(i, t, None, now) for now, i, t in events]
+    assert not any(st.sets for st in steps)
+    assert intake.queue_advice() == ("nocs comes 250 ms after the depth of its stamp, at 30 Hz: "
+                                     "queue_size must be above 7.5")
+    full = [text for st in steps for lv, key, text in st.log if key == "sync_queue_full"]
+    assert full[-1].endswith("(nocs comes 250 ms after the depth of its stamp, at 30 Hz: "
+                             "queue_size must be above 7.5)")
+    intake.sync.configure(queue_size=10)
+    assert intake.queue_advice() == ""  # the queue covers it
+
+
 def test_intake_reports_a_jump_back_once_for_the_node_to_reset():
     messages = [(i, t * SEC + k * FRAME_DT, 20 + n / 10) for n, (t, k, i) in enumerate(
         (t, k, i) for t in (10, 2) for k in range(4) for i in range(3))]
@@ -485,6 +506,16 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "others than queue_size messages (raise queue_size to cover its delay times the "
             "others' rate)",
         ),  # the same trial: NOCS and mask 300 ms late at 30 Hz, queue_size 5
+        (
+            {"window": WindowEstimate(None, reason="no frames yet"), "matched": 0,
+             "sync_dropped": 399, "rejected": {"sync_queue_full": 399},
+             "queue_advice": "nocs comes 250 ms after the depth of its stamp, at 30 Hz: "
+                             "queue_size must be above 7.5"},
+            Rates(5.0, 0, 0, 0),
+            DiagnosticStatus.WARN,
+            "behind the others than queue_size messages (nocs comes 250 ms after the depth of "
+            "its stamp, at 30 Hz: queue_size must be above 7.5)",
+        ),  # the re-run trial: the rule, but no number
         (
             {"sync_dropped": 900, "rejected": {"sync_queue_full": 800, "sync_unmatched": 100},
              "input_ages": (("depth", 0.01), ("nocs", 6.2), ("mask", 6.2))},

@@ -58,6 +58,8 @@ class DiagnosticsInput:
     no_camera_info: str = ""
     # (input name, seconds since its last message, None before the first) for each image input.
     input_ages: tuple = ()
+    # The queue_size the inputs' measured delays need, when the queue is too short ('' else).
+    queue_advice: str = ""
 
 
 @dataclass(frozen=True)
@@ -247,8 +249,9 @@ def _sync_hint(d: DiagnosticsInput) -> str:
                 "sync needs equal stamps; sync_mode approximate matches within sync_slop)")
     if full:
         return (f"{full} messages dropped from full queues: an input is stamped further "
-                "behind the others than queue_size messages (raise queue_size to cover its "
-                "delay times the others' rate)")
+                "behind the others than queue_size messages (" + (
+                    d.queue_advice or "raise queue_size to cover its delay times the others' "
+                    "rate") + ")")
     return "is the NOCS or mask topic silent?"
 
 

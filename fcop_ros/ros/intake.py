@@ -13,7 +13,7 @@ matched for :data:`FLOWING_SECONDS`, are a WARN that names what is missing.
 """
 from __future__ import annotations
 
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass
 
 from .sync import StampSynchronizer
@@ -52,11 +52,55 @@ class Intake:
         self._last_match: float | None = None  # clock time of the last matched set
         self._said_flowing: set = set()  # drop reasons said at INFO since their last WARN
         self.received = [0] * len(self.inputs)  # messages per input
+        # (stamp, clock time) of each input's recent messages, and how late each input's newest
+        # message came after the first of its stamp (s; None until known): queue_size advice.
+        self._arrivals = [deque(maxlen=128) for _ in self.inputs]
+        self._when: list = [{} for _ in self.inputs]  # stamp -> clock time, the same messages
+        self._lag: list = [None] * len(self.inputs)
+
+    def _note_arrival(self, index: int, stamp: int, now: float) -> None:
+        seen = self._arrivals[index]
+        if len(seen) == seen.maxlen:
+            self._when[index].pop(seen[0][0], None)
+        seen.append((stamp, now))
+        self._when[index].setdefault(stamp, now)
+        slop = self.sync.slop_ns
+        first = []
+        for j, when in enumerate(self._when):
+            if j == index:
+                continue
+            if stamp in when:
+                first.append(when[stamp])
+            elif slop > 0:  # approximate matching: the nearest recent stamps
+                first += [t for s, t in list(self._arrivals[j])[-16:] if abs(s - stamp) <= slop]
+        if first:
+            self._lag[index] = now - min(first)
+
+    def _rate(self, index: int) -> float:
+        seen = self._arrivals[index]
+        span = seen[-1][1] - seen[0][1] if len(seen) > 1 else 0.0
+        return (len(seen) - 1) / span if span > 0 else 0.0
+
+    def queue_advice(self) -> str:
+        """What queue_size the inputs' delays need, when the latest input comes later than the
+        queue covers (e.g. 'nocs comes 250 ms after the depth of its stamp, at 30 Hz:
+        queue_size must be above 7.5'), else ''."""
+        late = [(lag, i) for i, lag in enumerate(self._lag) if lag is not None and lag > 0]
+        if not late:
+            return ""
+        lag, i = max(late, key=lambda item: (round(item[0], 3), -item[1]))
+        rate, j = max((self._rate(j), j) for j in range(len(self.inputs)) if j != i)
+        need = lag * rate
+        if need < self.sync.queue_size:
+            return ""
+        return (f"{self.inputs[i]} comes {lag * 1000:.0f} ms after the {self.inputs[j]} of its "
+                f"stamp, at {rate:.0f} Hz: queue_size must be above {need:.1f}")
 
     def add(self, index: int, stamp: int, msg, now: float) -> SyncStep:
         """Add ``msg`` (input ``index``, stamped ``stamp`` ns) at clock time ``now`` (s)."""
         sync, inputs, stats = self.sync, self.inputs, self.sync.stats
         self.received[index] += 1
+        self._note_arrival(index, stamp, now)
         before, before_inputs = Counter(stats.dropped), Counter(stats.per_input)
         resets = stats.resets
         sets = sync.add(index, stamp, msg)
@@ -101,9 +145,10 @@ class Intake:
             hint = ""
             if reason == "queue_full" and waiting:
                 silent = " and ".join(inputs[i] for i in waiting)
+                advice = self.queue_advice() or ("raise queue_size to cover that delay times "
+                                                 "their rate")
                 hint = (f"; nothing from {silent} to match them: silent, or later than "
-                        f"queue_size ({sync.queue_size}) messages of the others (raise "
-                        "queue_size to cover that delay times their rate)")
+                        f"queue_size ({sync.queue_size}) messages of the others ({advice})")
             log.append(("warn", "sync_" + reason,
                         f"fcop_node: dropped {n} message(s) in the synchroniser: "
                         f"{reason.replace('_', ' ')} ({which}){hint}"))

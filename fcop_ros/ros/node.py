@@ -779,6 +779,7 @@ class FcopNode(Node):
                 no_camera_info=no_camera_info,
                 input_ages=tuple((name, None if t is None else now - t)
                                  for name, t in zip(INPUTS, self._input_seen)),
+                queue_advice=self.intake.queue_advice(),
             )
             inputs = tuple(self.intake.received)
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped,
