@@ -119,11 +119,25 @@ INPUT_NAMES = ("depth", "nocs", "mask")
 SEC, FRAME_DT = 1_000_000_000, 33_333_333
 
 
-def _steps(sync, messages):
-    """Each (input, stamp[, arrival time s]) through one Intake; arrival defaults to the stamp."""
-    intake = Intake(sync, INPUT_NAMES)
+def _steps(sync, messages, intake=None):
+    """Each (input, stamp[, arrival time s]) through one Intake (a new one on ``sync`` unless
+    given); arrival defaults to the stamp."""
+    intake = intake or Intake(sync, INPUT_NAMES)
     return [intake.add(m[0], m[1], f"{INPUT_NAMES[m[0]]}@{m[1]}",
                        m[2] if len(m) > 2 else m[1] / SEC) for m in messages]
+
+
+def _slow_network(frames, delay, until=None):
+    """(input, stamp, arrival s) in arrival order: depth at 30 Hz, NOCS and mask for every 6th
+    frame before frame ``until``, ``delay(k)`` seconds after the depth, with its stamp (a
+    segmentation network slower than the camera)."""
+    events = []
+    for k in range(frames):
+        events.append((k / 30, 0, k * FRAME_DT))
+        if k % 6 == 0 and (until is None or k < until):
+            late = k / 30 + delay(k)
+            events += [(late, 1, k * FRAME_DT), (late, 2, k * FRAME_DT)]
+    return [(i, t, now) for now, i, t in sorted(events)]
 
 
 def _lines(steps, level=None):
@@ -163,14 +177,9 @@ def test_intake_warns_when_the_slowest_input_is_the_one_dropped_while_frames_mat
     """The re-run trial: NOCS and mask 265 ms late with queue_size 8: 33 of 125 NOCS frames
     matched, and the lost NOCS were said once at INFO as expected flow. Every message of the
     slowest input should make a frame: its drops are a WARN."""
-    events = []
-    for k in range(300):  # 10 s
-        events.append((k / 30, 0, k * FRAME_DT))
-        if k % 6 == 0:  # the network's delay varies: 250 or 300 ms
-            late = k / 30 + (0.25 if k % 12 else 0.30)
-            events += [(late, 1, k * FRAME_DT), (late, 2, k * FRAME_DT)]
-    events.sort()
-    steps = _steps(StampSynchronizer(3, queue_size=8), [(i, t, now) for now, i, t in events])
+    # 10 s; the network's delay varies: 250 or 300 ms.
+    messages = _slow_network(300, lambda k: 0.25 if k % 12 else 0.30)
+    steps = _steps(StampSynchronizer(3, queue_size=8), messages)
     assert sum(len(st.sets) for st in steps) == 25  # those 250 ms late
     first = next(n for n, st in enumerate(steps) if st.sets)  # frames flow from here on
     warned = " ".join(text for st in steps[first + 1:] for lv, key, text in st.log
@@ -183,14 +192,8 @@ def test_intake_warns_when_the_slowest_input_is_the_one_dropped_while_frames_mat
 def test_intake_measures_the_late_inputs_delay_and_says_the_queue_size_it_needs():
     """NOCS and mask 250 ms after their 30 Hz depth with the default queue_size 5: nothing can
     match, and the WARN says how large queue_size must be, once a late NOCS has come."""
-    events = []
-    for k in range(60):
-        events.append((k / 30, 0, k * FRAME_DT))
-        if k % 6 == 0:
-            events += [(k / 30 + 0.25, 1, k * FRAME_DT), (k / 30 + 0.25, 2, k * FRAME_DT)]
-    events.sort()
     intake = Intake(StampSynchronizer(3, queue_size=5), INPUT_NAMES)
-    steps = [intake.add(i, t, None, now) for now, i, t in events]
+    steps = _steps(None, _slow_network(60, lambda k: 0.25), intake)
     assert not any(st.sets for st in steps)
     assert intake.queue_advice() == ("nocs comes 250 ms after the depth of its stamp, at 30 Hz: "
                                      "queue_size must be above 7.5")
@@ -199,6 +202,13 @@ def test_intake_measures_the_late_inputs_delay_and_says_the_queue_size_it_needs(
                              "queue_size must be above 7.5)")
     intake.sync.configure(queue_size=10)
     assert intake.queue_advice() == ""  # the queue covers it
+    # Approximate matching: NOCS and mask stamped 3 ms off their depth's are found within slop.
+    jittered = [(i, t + (3_000_000 if i else 0), now)
+                for i, t, now in _slow_network(60, lambda k: 0.25)]
+    intake = Intake(StampSynchronizer(3, queue_size=5, slop=0.01), INPUT_NAMES)
+    _steps(None, jittered, intake)
+    assert intake.queue_advice() == ("nocs comes 250 ms after the depth of its stamp, at 30 Hz: "
+                                     "queue_size must be above 7.5")
 
 
 def test_intake_reports_a_jump_back_once_for_the_node_to_reset():
@@ -217,20 +227,15 @@ def test_intake_takes_a_slower_nocs_network_as_flow_and_warns_when_it_goes_silen
     """30 Hz depth; NOCS and mask for every 6th frame, 250 ms late, with its depth's stamp (a
     hostile trial's robot): once frames match, the drops are said once at INFO; NOCS and mask
     stopping after 10 s is a WARN naming them once no frame has matched for 5 s."""
-    events = []
-    for k in range(600):  # 20 s
-        events.append((k / 30, 0, k * FRAME_DT))
-        if k % 6 == 0 and k < 300:
-            events += [(k / 30 + 0.25, 1, k * FRAME_DT), (k / 30 + 0.25, 2, k * FRAME_DT)]
-    events.sort()
-    steps = _steps(StampSynchronizer(3, queue_size=10), [(i, t, now) for now, i, t in events])
-    matched_at = [e[0] for e, st in zip(events, steps) if st.sets]
+    messages = _slow_network(600, lambda k: 0.25, until=300)  # 20 s, NOCS and mask for 10
+    steps = _steps(StampSynchronizer(3, queue_size=10), messages)
+    matched_at = [m[2] for m, st in zip(messages, steps) if st.sets]
     assert len(matched_at) == 50 and matched_at[-1] < 10.3
     # Five of six depth images never match: dropped as unmatched, or from the full queue while
     # their frame's NOCS is on its way; after 10 s every depth image goes from the full queue.
     assert sum((st.dropped for st in steps), Counter()) == {"sync_queue_full": 442,
                                                             "sync_unmatched": 98}
-    said = [(e[0], lv, key) for e, st in zip(events, steps) for lv, key, _ in st.log]
+    said = [(m[2], lv, key) for m, st in zip(messages, steps) for lv, key, _ in st.log]
     assert [(lv, key) for _, lv, key in said if lv == "info"] == [
         ("info", "sync_flowing_queue_full"), ("info", "sync_flowing_unmatched")]
     warns = [(t, key) for t, lv, key in said if lv == "warn"]

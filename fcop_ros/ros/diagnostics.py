@@ -142,7 +142,7 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         if d.last_reason:
             message += f"; the newest frame: {d.last_reason}"
         if d.matched == 0 and d.sync_dropped > 0:
-            message += f"; no depth, NOCS and mask set has matched: {_sync_hint(d)}"
+            message += f"; no depth, NOCS and mask set has matched: {_sync_hint(d, silent)}"
     elif silent and len(silent) == len(d.input_ages):
         level = WARN
         message = (f"focal {win.focal:.1f} px from an estimate {d.age or 0:.1f} s old: no input "
@@ -159,14 +159,15 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         message = (
             f"focal {win.focal:.1f} px from an ageing estimate: {rates.answered} depth images "
             f"in the last {rates.span:.1f} s but no matched depth, NOCS and mask set "
-            f"({_sync_hint(d)})"
+            f"({_sync_hint(d, silent)})"
         )
     elif lost:
         level = WARN
         name, sent = lost
         message = (
             f"focal {win.focal:.1f} px from few frames: only {rates.matched} of the {sent} "
-            f"{name} messages in the last {rates.span:.1f} s made a frame ({_sync_hint(d)})"
+            f"{name} messages in the last {rates.span:.1f} s made a frame "
+            f"({_sync_hint(d, silent)})"
         )
     elif rates.refused >= 5 and 2 * rates.refused > rates.processed:
         level = WARN
@@ -234,10 +235,10 @@ def _slowest_lost(d: DiagnosticsInput, rates: Rates):
     return None
 
 
-def _sync_hint(d: DiagnosticsInput) -> str:
+def _sync_hint(d: DiagnosticsInput, silent: list) -> str:
     """Why depth, NOCS and mask do not match, and the parameter that answers it: an input silent
-    now, else what the synchroniser's drops (counted as rejected 'sync_<reason>') say."""
-    silent = _silent(d)
+    now (``silent``: :func:`_silent`'s), else what the synchroniser's drops (counted as rejected
+    'sync_<reason>') say."""
     if silent and len(silent) < len(d.input_ages):
         return " and ".join(f"no {name} message for {age:.1f} s" for name, age in silent) + (
             " (silent, or " + ("its topic" if len(silent) == 1 else "their topics")

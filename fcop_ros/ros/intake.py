@@ -14,6 +14,7 @@ matched for :data:`FLOWING_SECONDS`, are a WARN that names what is missing.
 from __future__ import annotations
 
 from collections import Counter, deque
+from itertools import islice
 from dataclasses import dataclass
 
 from .sync import StampSynchronizer
@@ -72,9 +73,16 @@ class Intake:
             if stamp in when:
                 first.append(when[stamp])
             elif slop > 0:  # approximate matching: the nearest recent stamps
-                first += [t for s, t in list(self._arrivals[j])[-16:] if abs(s - stamp) <= slop]
+                first += [t for s, t in islice(reversed(self._arrivals[j]), 16)
+                          if abs(s - stamp) <= slop]
         if first:
             self._lag[index] = now - min(first)
+
+    def ages(self, now: float) -> tuple:
+        """(input name, seconds since its last message at clock time ``now``, None before the
+        first) for each input."""
+        return tuple((name, now - seen[-1][1] if seen else None)
+                     for name, seen in zip(self.inputs, self._arrivals))
 
     def _rate(self, index: int) -> float:
         seen = self._arrivals[index]

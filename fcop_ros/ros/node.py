@@ -132,7 +132,6 @@ class FcopNode(Node):
         self.rejected: Counter = Counter()  # dropped input, by reason
         self.warnings: Counter = Counter()  # accepted input that deserved a word, by reason
         self._latest: LatestEstimate | None = None  # the last CameraInfo publication (see latest)
-        self.received = 0  # input messages
         self.published = 0  # frames whose estimate was published (poses and markers)
         self.camera_info_published = 0
         # Matched frames replaced in the hand-off before the estimator took them.
@@ -165,7 +164,6 @@ class FcopNode(Node):
         self._warned_distortion = False
         self._rng = np.random.default_rng(None if self.p["seed"] < 0 else int(self.p["seed"]))
         self.intake = Intake(self._new_sync(), INPUTS)
-        self._input_seen: list = [None] * len(INPUTS)  # clock time of each input's last message
         self.estimator_options = estimator_options(self.p)
         # The window, the image size it holds and the publish gate; under self._lock.
         self.tracker = FocalTracker(
@@ -347,6 +345,11 @@ class FcopNode(Node):
         return StampSynchronizer(len(INPUTS), *sync_settings(self.p))
 
     @property
+    def received(self) -> int:
+        """Input messages taken, all inputs together."""
+        return sum(self.intake.received)
+
+    @property
     def sync(self) -> StampSynchronizer:
         """The stamp synchroniser of the three inputs (under the node's lock)."""
         return self.intake.sync
@@ -388,10 +391,7 @@ class FcopNode(Node):
     # ----- input side: cheap, never waits for the estimator
     def _on_image(self, index: int, msg: Image) -> None:
         with self._lock:
-            self.received += 1
-            now = self._now()
-            self._input_seen[index] = now
-            step = self.intake.add(index, stamp_ns(msg), msg, now)
+            step = self.intake.add(index, stamp_ns(msg), msg, self._now())
             if step.jumped:  # before the new frames reach the worker
                 self._reset_locked()
             self.rejected.update(step.dropped)
@@ -777,8 +777,7 @@ class FcopNode(Node):
                 warming_up=self._warming_up,
                 last_reason=self._newest_refusal,
                 no_camera_info=no_camera_info,
-                input_ages=tuple((name, None if t is None else now - t)
-                                 for name, t in zip(INPUTS, self._input_seen)),
+                input_ages=self.intake.ages(now),
                 queue_advice=self.intake.queue_advice(),
             )
             inputs = tuple(self.intake.received)

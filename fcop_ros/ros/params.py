@@ -176,6 +176,8 @@ PARAMETERS: dict[str, ParamSpec] = {
 }
 # Set once at start-up: refused at run time (the descriptor says read_only).
 READ_ONLY = frozenset(name for name, spec in PARAMETERS.items() if spec.read_only)
+
+
 def estimator_options(p: dict) -> EstimatorOptions:
     """The estimator's settings from a complete set of parameter values."""
     return EstimatorOptions(
