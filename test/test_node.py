@@ -177,6 +177,8 @@ def test_reset_service_clears_window_and_the_latched_estimate(harness, capfd):
         assert spin_until(h.ex, fut.done, 10)
         assert fut.result().success
     assert len(h.node.window) == 0 and h.node.window.current.focal is None
+    # node.latest mirrors ~/latest_camera_info (a newcomer's review: it kept the estimate).
+    assert h.node.latest is None and h.node.last_estimate is None
     # A late joiner of ~/latest_camera_info gets nothing from before the reset ...
     late = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -653,6 +655,27 @@ def test_frames_refused_for_their_encoding_warn_and_name_the_newest(harness):
     assert "32FC1" in st.message
     h.node._on_reset(Trigger.Request(), Trigger.Response())
     assert "newest" not in h.node.diagnostic_status().message
+
+
+def test_frames_that_fail_count_as_frames_without_a_focal(harness, monkeypatch, capfd):
+    """A newcomer's review: a frame whose estimate raised was counted as an exception but not
+    as a frame without a focal, so /diagnostics stayed OK on a node whose every frame failed."""
+    h = harness()
+    h.node._rates.seconds = 120.0
+    for k in range(3):
+        assert h.frame(frame_messages(clean_frame(1), T0 + k * DT))
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("boom")
+    monkeypatch.setattr("fcop_ros.ros.node.estimate_frame", broken)
+    for k in range(3, 9):
+        assert h.frame(frame_messages(clean_frame(1), T0 + k * DT))
+    assert h.node.rejected["exception"] == 6
+    st = h.node.diagnostic_status()
+    assert st.level == DiagnosticStatus.WARN, st.message
+    assert "6 of the 9 frames" in st.message, st.message
+    assert "(the newest: failed: RuntimeError: boom)" in st.message, st.message
+    assert "RuntimeError: boom" in capfd.readouterr().err
 
 
 def test_after_a_reset_a_frame_of_another_size_is_no_stray(harness, capfd):

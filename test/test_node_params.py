@@ -42,6 +42,9 @@ def values(status):
      ["qos_overrides./depth.subscription.reliability='sometimes'", "reliable, best_effort"]),
     ("qos_overrides./camera_info.publisher.history:=7",
      ["qos_overrides./camera_info.publisher.history=7", "keep_last"]),
+    # rclpy's InvalidServiceNameException was a traceback (a newcomer's review, stop 27).
+    ("set_camera_info_service:=set info",
+     ["set_camera_info_service='set info'", "a service name (topic name must not contain"]),
 ])
 def test_bad_parameter_at_start_up_is_one_line_and_exit_2(arg, expected):
     exe = os.path.join(BIN, "fcop_node")
@@ -124,6 +127,9 @@ def test_help_prints_usage_and_does_not_start_the_node():
     ({"focal_min": 50.0, "focal_max": 10.0},
      "parameter focal_max=10.0 is not allowed: it must be above focal_min=50.0"),
     ({"camera_name": "my camera"}, "parameter camera_name='my camera' is not allowed"),
+    ({"set_camera_info_service": "cam//set_camera_info"},
+     "parameter set_camera_info_service='cam//set_camera_info' is not allowed: a service name "
+     "(topic name must not contain repeated '/')"),
 ])
 def test_bad_parameter_in_process_raises_parameter_error(overrides, expected):
     from fcop_ros.ros.node import FcopNode

@@ -211,6 +211,29 @@ def test_intake_measures_the_late_inputs_delay_and_says_the_queue_size_it_needs(
                                      "queue_size must be above 7.5")
 
 
+def test_intake_forgets_a_delay_once_the_input_comes_first():
+    """A newcomer's review: an input late once kept its old delay when it later came first
+    for its stamps, so the advice quoted a delay that no longer held."""
+    intake = Intake(StampSynchronizer(3, queue_size=5), INPUT_NAMES)
+    _steps(None, _slow_network(60, lambda k: 0.25), intake)
+    assert "nocs comes 250 ms" in intake.queue_advice()
+    # The network catches up: NOCS and mask of each stamp come 10 ms before its depth.
+    after = [(i, t + 60 * FRAME_DT, now + 2.0 - (0.01 if i else 0.0))
+             for i, t, now in _slow_network(60, lambda k: 0.0)]
+    _steps(None, sorted(after, key=lambda m: m[2]), intake)
+    assert intake.queue_advice() == ""
+
+
+def test_intake_counts_what_a_smaller_queue_drops():
+    """A newcomer's review: messages a run-time queue_size cut dropped reached the
+    synchroniser's stats but not the node's count of dropped input."""
+    intake = Intake(StampSynchronizer(3, queue_size=5), INPUT_NAMES)
+    _steps(None, [(0, 10 * SEC + k * FRAME_DT) for k in range(5)], intake)
+    assert intake.configure(2, 0.0) == {"sync_queue_full": 3}
+    assert intake.sync.stats.dropped["queue_full"] == 3
+    assert intake.configure(8, 0.01) == {} and intake.sync.slop_ns == 10_000_000
+
+
 def test_intake_reports_a_jump_back_once_for_the_node_to_reset():
     messages = [(i, t * SEC + k * FRAME_DT, 20 + n / 10) for n, (t, k, i) in enumerate(
         (t, k, i) for t in (10, 2) for k in range(4) for i in range(3))]

@@ -75,8 +75,23 @@ class Intake:
             elif slop > 0:  # approximate matching: the nearest recent stamps
                 first += [t for s, t in islice(reversed(self._arrivals[j]), 16)
                           if abs(s - stamp) <= slop]
-        if first:
-            self._lag[index] = now - min(first)
+        # First of its stamp: on time now, whatever it was before.
+        self._lag[index] = now - min(first) if first else 0.0
+
+    def reset(self) -> None:
+        """A fresh start of the synchroniser (its clocks too): no frame has matched since. The
+        inputs' arrivals and delays stay: they describe the inputs, not the frames."""
+        self.sync.reset(clocks=True)
+        self._last_match = None
+        self._said_flowing.clear()
+
+    def configure(self, queue_size: int, slop: float) -> Counter:
+        """Change the synchroniser's queue bound and slop; the messages a smaller queue drops,
+        under the names :meth:`add` counts them by."""
+        before = self.sync.stats.dropped["queue_full"]
+        self.sync.configure(queue_size, slop)
+        lost = self.sync.stats.dropped["queue_full"] - before
+        return Counter({"sync_queue_full": lost} if lost else {})
 
     def ages(self, now: float) -> tuple:
         """(input name, seconds since its last message at clock time ``now``, None before the

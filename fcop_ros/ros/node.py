@@ -25,7 +25,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import InvalidServiceNameException, ParameterException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -177,11 +177,11 @@ class FcopNode(Node):
         self.srv_save = self.create_service(
             Trigger, "~/save_calibration", self._on_save_calibration
         )
-        self.set_info_client = (
-            self.create_client(SetCameraInfo, self.p["set_camera_info_service"])
-            if self.p["set_camera_info_service"]
-            else None
-        )
+        try:
+            self.set_info_client = self._set_camera_info_client()
+        except ParameterError:
+            Node.destroy_node(self)  # the worker has not started
+            raise
         self._diag_timer = self._diagnostics_timer()
         self._warn_unknown_overrides()
         self.worker.start()
@@ -247,6 +247,20 @@ class FcopNode(Node):
         )
         self.pub_latest = self._latched_publisher()
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+
+    def _set_camera_info_client(self):
+        """The client of set_camera_info_service (None for ''); a name ROS cannot take is a
+        ParameterError in rclpy's words."""
+        name = self.p["set_camera_info_service"]
+        if not name:
+            return None
+        try:
+            return self.create_client(SetCameraInfo, name)
+        except InvalidServiceNameException as exc:
+            why = str(exc).splitlines()[0].removeprefix("Invalid service name: ").rstrip(":")
+            raise ParameterError(
+                f"parameter set_camera_info_service={name!r} is not allowed: a service name "
+                f"({why})") from None
 
     # ----- parameters
     def _warn_unknown_overrides(self) -> None:
@@ -331,7 +345,7 @@ class FcopNode(Node):
         with self._lock:
             self.p = new
             if changed & SYNC_PARAMETERS:
-                self.sync.configure(*sync_settings(new))
+                self.rejected.update(self.intake.configure(*sync_settings(new)))
             if changed & ESTIMATOR_PARAMETERS:
                 self.estimator_options = estimator_options(new)
             if changed & (WINDOW_PARAMETERS | GATE_PARAMETERS):
@@ -520,10 +534,12 @@ class FcopNode(Node):
         Ctrl-C shut the context down on its publishers: nothing to say then."""
         if self.worker.stopping or not self.context.ok():
             return
-        self._reject("exception")
-        self._throttle.warn(
-            "exception", f"fcop_node: frame {item[0]} failed: {type(exc).__name__}: {exc}"
-        )
+        why = f"failed: {type(exc).__name__}: {exc}"
+        with self._lock:  # a frame without a focal, as one the estimator refused
+            self.rejected["exception"] += 1
+            self._no_focal_frames += 1
+            self._newest_refusal = _clipped(why)
+        self._throttle.warn("exception", f"fcop_node: frame {item[0]} {why}")
 
     def _reject(self, reason: str, n: int = 1) -> None:
         """Count dropped input; the worker and the executor thread both do, diagnostics reads."""
@@ -678,14 +694,17 @@ class FcopNode(Node):
     def _on_reset(self, request, response):
         with self._lock:
             self._reset_locked()
-            self.sync.reset(clocks=True)
+            self.intake.reset()
+            self.last_estimate = None
         with self._pub_lock:  # a new publisher: late joiners get nothing from before the reset
             self.destroy_publisher(self.pub_latest)
             self.pub_latest = self._latched_publisher()
+            self._latest, self._last_objects = None, []
             # In the same step: a frame taken before the reset finds its stamp gone.
             self._answers.forget()
         response.success = True
-        response.message = "focal window, synchroniser, hand-off and latest_camera_info cleared"
+        response.message = ("focal window, synchroniser, hand-off, latest_camera_info and "
+                            "the latest estimate cleared")
         self._throttle.info("reset", "fcop_node: reset by service")
         return response
 
