@@ -40,6 +40,13 @@ stretched or flattened by up to 3 times the NOCS field's strength along the dire
 share with depth (the viewing axis), so the error turns with the view; masks are polygons with
 holes, as a detector's outlines are; and, with per-pixel NOCS noise, the NOCS are quantised to 8
 bits, as an rgb8 NOCS image holds them.
+A fifth (``variant="heldout5"``, fixed on 24 Nov 2026 before that round's choices) errs as
+networks that work on patches and parts do: its depth fields are piecewise constant over a
+random grid of tiles, softened at their seams (a network run tile by tile); its edge bleeding
+is a halo that decays away from each depth edge rather than a band; each object's NOCS are
+split by a random plane through the object and one side is displaced (a part, such as a
+handle, put a little off); and each instance's mask is its convex hull (what a box-prompted
+segmenter fills in: the concavities between handle and body, the background between parts).
 """
 from __future__ import annotations
 
@@ -195,9 +202,24 @@ def _ring_field(rng, h, w, cells):
     return (out - out.mean()) / max(out.std(), 1e-9)
 
 
-VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4")
+def _tile_field(rng, h, w, cells):
+    """Piecewise constant over a grid of about (cells + 1)^2 tiles of random sizes, each tile a
+    random level, softened over a few pixels at the seams; zero mean and unit std."""
+    n = cells + 1
+    ys = np.sort(rng.uniform(0, h, n - 1)).astype(int)
+    xs = np.sort(rng.uniform(0, w, n - 1)).astype(int)
+    levels = rng.normal(size=(n, n))
+    iy = np.searchsorted(ys, np.arange(h), side="right")
+    ix = np.searchsorted(xs, np.arange(w), side="right")
+    out = levels[iy][:, ix].astype(np.float32)
+    k = 2 * max(1, max(h, w) // 160) + 1
+    out = cv2.GaussianBlur(out, (k, k), 0).astype(np.float64)
+    return (out - out.mean()) / max(out.std(), 1e-9)
+
+
+VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5")
 _FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field,
-           "heldout3": _poly_field, "heldout4": _ring_field}
+           "heldout3": _poly_field, "heldout4": _ring_field, "heldout5": _tile_field}
 
 
 @dataclass
@@ -316,7 +338,14 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         grad = np.abs(cv2.Laplacian(filled, cv2.CV_32F))
         edges = (grad > 0.02 * filled).astype(np.uint8)
         band = cv2.dilate(edges, np.ones((k, k), np.uint8)).astype(bool) & finite
-        depth[band] = blurred[band]
+        if state.variant == "heldout5":
+            # A halo: the blend towards the blurred depth decays with the distance from the edge.
+            dist = cv2.distanceTransform((1 - edges).astype(np.uint8), cv2.DIST_L2, 3)
+            share = np.exp(-dist / max(e.edge_px, 1)).astype(np.float64)
+            halo = finite & (share > 0.02)
+            depth[halo] = (1 - share[halo]) * depth[halo] + share[halo] * blurred[halo]
+        else:
+            depth[band] = blurred[band]
         if e.flying > 0:
             lo = cv2.erode(filled, np.ones((k, k), np.uint8)).astype(np.float64)
             hi = cv2.dilate(filled, np.ones((k, k), np.uint8)).astype(np.float64)
@@ -363,6 +392,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             nocs = _bulge(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout4":
             nocs = _view_stretch(nocs, frame, state, rng, e.nocs_field)
+        elif state.variant == "heldout5":
+            nocs = _part_shift(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout":
             # Scaled to ``nocs_field`` rms on the objects, as the other variants' distortions:
             # unscaled, q^T W q with |q| < 0.5 moved the NOCS 8x less than the tuning field.
@@ -429,6 +460,23 @@ def _bulge(nocs, mask, state, rng, rms):
     return out
 
 
+def _part_shift(nocs, mask, state, rng, rms):
+    """Each object's NOCS on one side of a random plane through its centre displaced by a
+    vector (both drawn once per object for the sequence), scaled so that the displacement is
+    ``rms`` per NOCS axis over the object: a part of the shape put a little off."""
+    out = nocs.copy()
+    for iid in np.unique(mask[mask > 0]):
+        m = mask == iid
+        normal, shift = state._kept(
+            ("part", int(iid)),
+            lambda: ((v := rng.normal(size=3)) / np.linalg.norm(v), rng.normal(size=3)))
+        q = nocs[m] - 0.5
+        side = q @ normal > 0
+        move = np.where(side[:, None], shift[None, :], 0.0)
+        out[m] = nocs[m] + rms * move / max(np.sqrt(np.mean(move ** 2)), 1e-9)
+    return out
+
+
 def _view_stretch(nocs, frame, state, rng, rms):
     """Each object's NOCS stretched or flattened (per object, for the whole sequence) along the
     NOCS direction that depth follows on the object (the viewing axis in its frame, from the
@@ -467,6 +515,15 @@ def _polygon(m, px, rng):
     return out
 
 
+def _hull(m):
+    """Instance mask m filled to the convex hull of each of its parts."""
+    contours, _ = cv2.findContours(m.astype(np.uint8), cv2.RETR_EXTERNAL,
+                                   cv2.CHAIN_APPROX_SIMPLE)
+    out = np.zeros(m.shape, np.uint8)
+    cv2.fillPoly(out, [cv2.convexHull(c) for c in contours], 1)
+    return out
+
+
 def _ragged(m, px, rng):
     """Instance mask m with a ragged boundary: each pixel within r <= px of it (either side) is
     flipped with one probability up to three quarters per instance."""
@@ -479,7 +536,7 @@ def _ragged(m, px, rng):
 
 def _mask_errors(mask, nocs, px, rng, variant):
     """Erode or dilate (``heldout2``: shift; ``heldout3``: fray; ``heldout4``: outline as a
-    polygon with holes) each instance by up to ``px`` pixels; grown pixels keep the background
+    polygon with holes; ``heldout5``: fill to the convex hull) each instance by up to ``px`` pixels; grown pixels keep the background
     depth and take the nearest object's NOCS, as a segmentation network's would."""
     shape = {"heldout": cv2.MORPH_ELLIPSE, "heldout3": cv2.MORPH_CROSS}.get(variant,
                                                                            cv2.MORPH_RECT)
@@ -497,6 +554,8 @@ def _mask_errors(mask, nocs, px, rng, variant):
             m = _ragged(m.astype(bool), int(rng.integers(1, px + 1)), rng)
         elif variant == "heldout4":
             m = _polygon(m, px, rng)
+        elif variant == "heldout5":
+            m = _hull(m)
         elif r := int(rng.integers(-px, px + 1)):
             kern = cv2.getStructuringElement(shape, (2 * abs(r) + 1,) * 2)
             m = cv2.dilate(m, kern) if r > 0 else cv2.erode(m, kern)
