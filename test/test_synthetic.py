@@ -69,13 +69,12 @@ def test_world_variants_share_the_scene_and_the_strength_of_its_errors():
     err about as strongly: rms relative depth error of a smooth field alone and rms NOCS
     displacement per axis of a NOCS distortion alone, over 4 frames (measured, tuning /
     heldout / heldout2 / heldout3 / heldout4 / heldout5: depth 0.030 / 0.038 / 0.033 / 0.040 /
-    0.025 / 0.036, NOCS 0.016 each but heldout4's 0.003: its stretch lies all along the one axis that moves f, the
-    viewing axis, and is sized as the relief and shape families are, by its factor; its first
-    version, stretched to 0.016 rms and with a surface field relative to depth rather than to
-    the object, cost the paper's method 17.6% on `predicted`, against 4-6% on the other models
-    and the paper's 6.87% on real data; the
-    held-out model's quadratic warp moved the NOCS 0.002 before it was scaled like the
-    others)."""
+    0.025 / 0.036, NOCS 0.016 each but heldout4's 0.003: its stretch lies all along the one axis
+    that moves f, the viewing axis, and is sized as the relief and shape families are, by its
+    factor; its first version, stretched to 0.016 rms and with a surface field relative to
+    depth rather than to the object, cost the paper's method 17.6% on `predicted`, against
+    4-6% on the other models and the paper's 6.87% on real data; the held-out model's
+    quadratic warp moved the NOCS 0.002 before it was scaled like the others)."""
     from fcop_ros.synthetic.world import VARIANTS, ErrorFamilies, world_frame
 
     for v in VARIANTS:

@@ -536,8 +536,9 @@ def _ragged(m, px, rng):
 
 def _mask_errors(mask, nocs, px, rng, variant):
     """Erode or dilate (``heldout2``: shift; ``heldout3``: fray; ``heldout4``: outline as a
-    polygon with holes; ``heldout5``: fill to the convex hull) each instance by up to ``px`` pixels; grown pixels keep the background
-    depth and take the nearest object's NOCS, as a segmentation network's would."""
+    polygon with holes; ``heldout5``: fill to the convex hull) each instance by up to ``px``
+    pixels; grown pixels keep the background depth and take the nearest object's NOCS, as a
+    segmentation network's would."""
     shape = {"heldout": cv2.MORPH_ELLIPSE, "heldout3": cv2.MORPH_CROSS}.get(variant,
                                                                            cv2.MORPH_RECT)
     new = np.zeros_like(mask)
