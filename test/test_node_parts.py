@@ -288,8 +288,8 @@ def test_estimate_frame_is_the_core_estimate_of_the_images_and_names_what_it_ref
     seed = int(np.random.default_rng(3).integers(2**31))
     want = estimate_focal(fr.depth.astype(np.float32), fr.nocs.astype(np.float32), fr.mask,
                           ((w - 1) / 2, (h - 1) / 2), options=opts, poses=False, seed=seed)
-    assert got.size == (w, h) and got.estimate.focal == pytest.approx(want.focal, rel=1e-9)
-    assert abs(got.estimate.focal / 600.0 - 1) < 0.01
+    assert got.image_size == (w, h) and got.focal == pytest.approx(want.focal, rel=1e-9)
+    assert abs(got.focal / 600.0 - 1) < 0.01
 
     small = mask_to_image(fr.mask[:-2], "mono8", head)
     wrong = depth_to_image(fr.depth, "32FC1", head)

@@ -24,7 +24,7 @@ def tracker(frames=5, max_uncertainty=0.05, focal_range=(100.0, 5000.0), **kw):
 def test_publishable_carries_the_windows_focal_and_image_size_and_drops_pixel_data():
     t = tracker()
     assert t.publishable is None and "no frames yet" in t.held_back()
-    step = t.add(estimate(600.0), 0.0, (640, 480))
+    step = t.add(estimate(600.0), 0.0)
     assert step.window is t.current and step.resized_from is None and step.kept_size is None
     assert step.ready is t.publishable
     assert (step.ready.focal, step.ready.width, step.ready.height) == (600.0, 640, 480)
@@ -35,17 +35,17 @@ def test_publishable_carries_the_windows_focal_and_image_size_and_drops_pixel_da
 def test_another_size_starts_a_new_window_only_with_a_focal_of_its_own():
     t = tracker()
     for k in range(3):
-        t.add(estimate(600.0), k, (640, 480))
-    step = t.add(empty((320, 240)), 3, (320, 240))
+        t.add(estimate(600.0), k)
+    step = t.add(empty((320, 240)), 3)
     assert step.kept_size == (640, 480) and step.window is None and len(t) == 3
     assert t.publishable.width == 640  # the old size's focal still answers 640x480 images
-    step = t.add(estimate(300.0), 4, (320, 240))
+    step = t.add(estimate(300.0, size=(320, 240)), 4)
     assert step.resized_from == (640, 480) and len(t) == 1 and t.size == (320, 240)
     assert abs(t.publishable.focal - 300.0) < 1e-9 and t.publishable.width == 320
     t.reset()
     assert t.publishable is None and len(t) == 0
     # An empty window takes any size, with or without a focal.
-    assert t.add(empty((640, 480)), 5, (640, 480)).kept_size is None and t.size == (640, 480)
+    assert t.add(empty((640, 480)), 5).kept_size is None and t.size == (640, 480)
 
 
 def test_new_window_settings_re_evaluate_the_kept_frames():
@@ -53,7 +53,7 @@ def test_new_window_settings_re_evaluate_the_kept_frames():
     back; settings that reach only the gate keep the window as it is."""
     t = tracker(frames=5)
     for k in range(5):
-        t.add(estimate(600.0 * (1 + 0.001 * k)), k, (640, 480))
+        t.add(estimate(600.0 * (1 + 0.001 * k)), k)
     window = t.window
     t.configure(WindowOptions(max_frames=5), 0.05, (100.0, 5000.0))
     assert t.window is window
@@ -67,7 +67,7 @@ def test_new_window_settings_re_evaluate_the_kept_frames():
 
 def test_the_gate_holds_back_an_uncertain_or_out_of_range_focal_and_frees_it_again():
     t = tracker(max_uncertainty=0.005)
-    t.add(estimate(600.0, std_rel=0.01), 0.0, (640, 480))
+    t.add(estimate(600.0, std_rel=0.01), 0.0)
     assert t.publishable is None and "above max_uncertainty 0.005" in t.held_back()
     t.configure(t.window.options, 0.05, (100.0, 5000.0))
     assert abs(t.publishable.focal - 600.0) < 1e-9 and t.held_back() == ""

@@ -4,8 +4,6 @@ the estimate. The node's estimator thread calls it and counts what it refuses; t
 poses and publishing stay with the node."""
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from msg_adapters import ImageFormatError, ImageSizeMismatch, frame_from_images
 
 from ..core import FocalEstimate, estimate_focal
@@ -16,15 +14,7 @@ class FrameRefused(Refused):
     """Images of a frame the estimator cannot read (encoding, size)."""
 
 
-@dataclass(frozen=True)
-class FrameEstimate:
-    """The frame's estimate and its image size (width, height)."""
-
-    estimate: FocalEstimate
-    size: tuple
-
-
-def estimate_frame(msgs, params: dict, camera_info_in, options, rng) -> FrameEstimate:
+def estimate_frame(msgs, params: dict, camera_info_in, options, rng) -> FocalEstimate:
     """Estimate the focal length of one (depth, nocs, mask) message set under the node's
     parameter values ``params`` and estimator ``options``, its triplets seeded from ``rng`` (a
     numpy Generator, drawn only for a frame that is estimated); FrameRefused for images of the
@@ -39,6 +29,5 @@ def estimate_frame(msgs, params: dict, camera_info_in, options, rng) -> FrameEst
         raise FrameRefused("bad_encoding", str(exc)) from None
     h, w = depth.shape
     intr = intrinsics(params, camera_info_in, w, h)
-    est = estimate_focal(depth, nocs, mask, (intr.cx, intr.cy), options=options, poses=False,
-                         seed=int(rng.integers(2**31)))
-    return FrameEstimate(est, (w, h))
+    return estimate_focal(depth, nocs, mask, (intr.cx, intr.cy), options=options, poses=False,
+                          seed=int(rng.integers(2**31)))

@@ -12,7 +12,6 @@ publishing never waits for the estimator, and the estimator never works on a bac
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import os
 import sys
 import threading
@@ -56,11 +55,14 @@ from .params import (
     WINDOW_PARAMETERS,
     ParameterError,
     allowed,
+    as_declared,
     check_combination,
     check_words,
     descriptor,
+    did_you_mean,
     estimator_options,
     gate_settings,
+    not_allowed,
     sync_settings,
     window_options,
 )
@@ -258,9 +260,8 @@ class FcopNode(Node):
             return self.create_client(SetCameraInfo, name)
         except InvalidServiceNameException as exc:
             why = str(exc).splitlines()[0].removeprefix("Invalid service name: ").rstrip(":")
-            raise ParameterError(
-                f"parameter set_camera_info_service={name!r} is not allowed: a service name "
-                f"({why})") from None
+            raise ParameterError(not_allowed("set_camera_info_service", name,
+                                             f"a service name ({why})")) from None
 
     # ----- parameters
     def _warn_unknown_overrides(self) -> None:
@@ -277,28 +278,21 @@ class FcopNode(Node):
         """' (did you mean ...?)' for a name the node does not have, or ''."""
         topics = sorted(s.topic_name for s in self._subs + [self.sub_info_in]) + [
             p.topic_name for p in (self.pub_info, self.pub_poses, self.pub_markers)]
-        hint = unknown_override_hint(name, topics)
-        if not hint:
-            close = difflib.get_close_matches(name, list(PARAMETERS), n=1)
-            hint = f" (did you mean {close[0]}?)" if close else ""
-        return hint
+        return unknown_override_hint(name, topics) or did_you_mean(name)
 
     def _declare_parameters(self) -> None:
         """Declare every parameter with its descriptor (rclpy refuses a wrong type or range, turned
         into one ParameterError line), then check what descriptors cannot say."""
         overrides = getattr(self, "_parameter_overrides", {})
-        for name, spec in PARAMETERS.items():
+        for name in PARAMETERS:
             given = overrides.get(name)
-            if given is not None and isinstance(spec.default, float) and type(given.value) is int:
-                # focal_min:=300 means 300.0
-                overrides[name] = Parameter(name, value=float(given.value))
+            if given is not None and as_declared(name, given.value) is not given.value:
+                overrides[name] = Parameter(name, value=as_declared(name, given.value))
             try:
-                declared = self.declare_parameter(name, spec.default, descriptor(name))
+                declared = self.declare_parameter(name, PARAMETERS[name].default, descriptor(name))
             except ParameterException:
                 value = overrides[name].value if name in overrides else "?"
-                raise ParameterError(
-                    f"parameter {name}={value!r} is not allowed: {allowed(name, value)}"
-                ) from None
+                raise ParameterError(not_allowed(name, value, allowed(name, value))) from None
             if declared.type_ == Parameter.Type.NOT_SET:  # rcl's reading of '[]' or a blank
                 raise ParameterError(f"parameter {name} has no value: {allowed(name)}")
         self.p = {name: self.get_parameter(name).value for name in PARAMETERS}
@@ -320,12 +314,9 @@ class FcopNode(Node):
                     "unknown_parameter",
                     f"fcop_node: cannot set parameter {prm.name}: not one of this node's"
                     f"{self._unknown_parameter_hint(prm.name)}")
-        return [
-            Parameter(prm.name, value=float(prm.value))
-            if prm.name in PARAMETERS and isinstance(PARAMETERS[prm.name].default, float)
-            and prm.type_ == Parameter.Type.INTEGER else prm
-            for prm in params
-        ]
+        return [Parameter(prm.name, value=as_declared(prm.name, prm.value))
+                if prm.name in PARAMETERS and prm.type_ == Parameter.Type.INTEGER else prm
+                for prm in params]
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         """rclpy has applied the descriptors (type, range, read-only); refuse what they cannot
@@ -612,10 +603,10 @@ class FcopNode(Node):
         with self._lock:
             camera_info_in = self._cam_in
         try:
-            frame = estimate_frame(msgs, p, camera_info_in, self.estimator_options, self._rng)
+            est = estimate_frame(msgs, p, camera_info_in, self.estimator_options, self._rng)
         except Refused as exc:
             return self._refuse_frame(exc.reason, str(exc))
-        est, (w, h) = frame.estimate, frame.size
+        w, h = est.image_size
         if est.mirrored:
             with self._lock:
                 self.warnings["mirrored_nocs"] += len(est.mirrored)
@@ -629,7 +620,7 @@ class FcopNode(Node):
         with self._lock:
             if generation is not None and generation != self.worker.generation:
                 return False  # taken before a reset
-            step = self.tracker.add(est, stamp * 1e-9, (w, h))
+            step = self.tracker.add(est, stamp * 1e-9)
             self.last_estimate = est
             self._newest_refusal = "" if est.focal is not None else _clipped(est.reason)
             self._no_focal_frames += est.focal is None

@@ -9,6 +9,7 @@ words, a text rule) and the rules between parameters are checked here. No rclpy 
 
 from __future__ import annotations
 
+import difflib
 import operator
 import re
 from dataclasses import dataclass
@@ -286,17 +287,36 @@ def descriptor(name: str) -> ParameterDescriptor:
     return d
 
 
+def as_declared(name: str, value):
+    """``value`` as the parameter ``name`` holds it: an integer given for a double parameter is
+    that double (``focal_min:=300`` and ``ros2 param set ... focal_min 300`` mean 300.0)."""
+    default = PARAMETERS[name].default
+    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
+def not_allowed(name: str, value, rule: str, source: str = "") -> str:
+    """The one wording of a refused value: 'parameter NAME=VALUE [from SOURCE] is not allowed:
+    RULE' (the source: where a tool read it, e.g. a params file or -p)."""
+    where = f" from {source}" if source else ""
+    return f"parameter {name}={value!r}{where} is not allowed: {rule}"
+
+
+def did_you_mean(name: str) -> str:
+    """' (did you mean X?)' for the parameter nearest a name the node does not have, or ''."""
+    close = difflib.get_close_matches(name, list(PARAMETERS), n=1)
+    return f" (did you mean {close[0]}?)" if close else ""
+
+
 def check_value(name: str, value):
     """``value`` converted to the parameter's type (an integer for a double is taken), or
     ParameterError naming name, value and what is allowed. Checks type and range as well as what
     a descriptor cannot say, for values that did not pass through rclpy (start-up, tools)."""
     spec = PARAMETERS[name]
-    default = spec.default
-    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
-        value = float(value)
-    if type(value) is not type(default):
-        raise ParameterError(
-            f"parameter {name}={value!r} is not allowed: {allowed(name, value)}")
+    value = as_declared(name, value)
+    if type(value) is not type(spec.default):
+        raise ParameterError(not_allowed(name, value, allowed(name, value)))
     if isinstance(value, bool):
         ok = True
     elif spec.choices:
@@ -308,7 +328,7 @@ def check_value(name: str, value):
     else:
         ok = "\n" not in value
     if not ok:
-        raise ParameterError(f"parameter {name}={value!r} is not allowed: {allowed(name)}")
+        raise ParameterError(not_allowed(name, value, allowed(name)))
     return value
 
 
@@ -354,4 +374,4 @@ def combination_conflict(p: dict, image_size=None, changed=()) -> tuple[str, str
 def check_combination(p: dict, image_size=None, changed=()) -> str:
     """combination_conflict in one line ('' if nothing is wrong)."""
     name, rule = combination_conflict(p, image_size, changed)
-    return f"parameter {name}={p[name]} is not allowed: {rule}" if name else ""
+    return not_allowed(name, p[name], rule) if name else ""

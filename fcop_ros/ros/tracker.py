@@ -90,9 +90,9 @@ class FocalTracker:
         """Why the window's focal does not go out now ('' when it does)."""
         return held_back(self.window.current, self._max_uncertainty, self._focal_range)
 
-    def add(self, est, t: float, size: tuple) -> TrackStep:
-        """Add one frame's FocalEstimate ``est`` of image ``size`` (width, height) at time ``t``
-        (seconds)."""
+    def add(self, est, t: float) -> TrackStep:
+        """Add one frame's FocalEstimate ``est`` (of its ``image_size``) at ``t`` (seconds)."""
+        size = tuple(est.image_size)
         resized = None
         if self.size != size:
             if est.focal is None and self.size is not None and len(self.window):

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import difflib
 from pathlib import Path
 
 import yaml
@@ -91,7 +90,7 @@ def check_parameters(values: dict, where: dict) -> dict:
     values with integers given for double parameters made doubles. ``where`` names the source."""
     from ..ros.qos import qos_override_problem
     from ..ros.params import (PARAMETERS, ParameterError, allowed, check_value,
-                              combination_conflict, defaults)
+                              combination_conflict, defaults, did_you_mean, not_allowed)
 
     known = sorted(PARAMETERS)
     out = {}
@@ -105,22 +104,18 @@ def check_parameters(values: dict, where: dict) -> dict:
             else:
                 problem = "" if isinstance(value, bool) else "true or false"
             if problem:
-                raise ReplayError(f"parameter {name}={value!r} from {src} is not allowed: "
-                                  f"{problem}")
+                raise ReplayError(not_allowed(name, value, problem, src))
             out[name] = value
             continue
         if name not in PARAMETERS:
-            close = difflib.get_close_matches(name, known, n=1)
-            hint = f" (did you mean {close[0]}?)" if close else ""
             raise ReplayError(
-                f"unknown parameter {name!r} from {src}{hint}; fcop_node's parameters: "
-                f"{', '.join(known)}"
+                f"unknown parameter {name!r} from {src}{did_you_mean(name)}; fcop_node's "
+                f"parameters: {', '.join(known)}"
             )
         try:  # type, range, choices and what a descriptor cannot say, as the node checks them
             value = check_value(name, value)
         except ParameterError:
-            raise ReplayError(f"parameter {name}={value!r} from {src} is not allowed: "
-                              f"{allowed(name, value)}") from None
+            raise ReplayError(not_allowed(name, value, allowed(name, value), src)) from None
         out[name] = value
 
     full = defaults()
@@ -132,7 +127,7 @@ def check_parameters(values: dict, where: dict) -> dict:
         full, changed={k for k in moved if where.get(k) == "-p"} or moved)
     if name:
         src = where.get(name, "the node's defaults")
-        raise ReplayError(f"parameter {name}={full[name]!r} from {src} is not allowed: {rule}")
+        raise ReplayError(not_allowed(name, full[name], rule, src))
     return out
 
 
