@@ -10,7 +10,7 @@ ROOT = Path(__file__).resolve().parents[1]
 MESSAGES = ("sensor_msgs", "geometry_msgs", "std_msgs", "visualization_msgs", "diagnostic_msgs",
             "std_srvs", "rcl_interfaces", "builtin_interfaces", "rosgraph_msgs")
 PLAIN = ("worker", "sync", "throttle", "calibration", "dds", "config", "allocator",
-         "command_line", "gate", "tracker", "answers", "intake")
+         "command_line", "gate", "tracker", "answers", "intake", "frame_outcome")
 WITHOUT_RCLPY = ("params", "diagnostics", "intrinsics", "frame_estimate")
 
 

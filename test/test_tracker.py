@@ -89,3 +89,45 @@ def test_each_depth_stamp_is_answered_once_and_a_late_answer_never_goes_back_in_
     a.forget()
     a.unanswered(-5)  # a restarted clock: anything goes again
     assert a.owed(-5) and not a.answered(50)
+
+
+def test_frame_outcome_says_what_each_step_means_without_a_node():
+    """The node's words for a frame, from the tracker's step alone: a stray size drops the frame,
+    a frame without evidence is counted, a new size and a restart are said every time."""
+    from fcop_ros.ros.frame_outcome import frame_outcome
+
+    t = tracker()
+    for k in range(3):
+        said = frame_outcome(estimate(600.0), t.add(estimate(600.0), k))
+        assert said.kept and not said.dropped and not said.log
+    stray = empty((320, 240))
+    said = frame_outcome(stray, t.add(stray, 3))
+    assert not said.kept and said.dropped == {"other_size_no_evidence": 1}
+    assert said.log == (("warn", "other_size_no_evidence",
+                         "fcop_node: dropped a 320x240 frame without focal evidence (nothing); "
+                         "the window keeps its 640x480 frames"),)
+    small = estimate(300.0, size=(320, 240))
+    said = frame_outcome(small, t.add(small, 4))
+    assert said.kept and [e[:2] for e in said.log] == [("event", "resized")]
+    assert "from 640x480 to 320x240: new focal window" in said.log[0][2]
+    nothing = empty((320, 240))
+    said = frame_outcome(nothing, t.add(nothing, 5))
+    assert said.kept and said.dropped == {"no_evidence": 1}
+    mirrored = estimate(300.0, size=(320, 240))
+    mirrored.mirrored = [3]
+    said = frame_outcome(mirrored, t.add(mirrored, 6))
+    assert said.warnings == {"mirrored_nocs": 1} and "instance(s) [3]" in said.log[0][2]
+
+
+def test_frame_outcome_says_a_zoom_each_time_the_window_restarts():
+    from fcop_ros.ros.frame_outcome import frame_outcome
+
+    t = tracker(frames=30)
+    for k in range(10):
+        t.add(estimate(600.0), k)
+    lines = []
+    for k in range(10, 20):
+        est = estimate(750.0)
+        lines += [e for e in frame_outcome(est, t.add(est, k)).log if e[1] == "zoom"]
+    assert len(lines) == 1 and lines[0][0] == "event", lines
+    assert lines[0][2].startswith("fcop_node: focal length changed (zoom?): window restarted")

@@ -45,6 +45,7 @@ from .calibration import default_calibration_path, write_calibration
 from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
 from .frame_estimate import estimate_frame
+from .frame_outcome import frame_outcome
 from .intake import Intake
 from .intrinsics import IntrinsicsRefused, Refused, camera_info_with, intrinsics
 from .params import (
@@ -409,8 +410,15 @@ class FcopNode(Node):
         for i, stamp, m in step.accepted:
             if i == 0:
                 self._answer_depth(stamp, m)
-        for level, key, text in step.log:
-            (self._throttle.warn if level == "warn" else self._throttle.info)(key, text)
+        self._say(step.log)
+
+    def _say(self, log) -> None:
+        """Log (level, key, line) entries: 'warn' and 'info' throttled by key, 'event' always."""
+        for level, key, text in log:
+            if level == "event":
+                self.get_logger().info(text)
+            else:
+                (self._throttle.warn if level == "warn" else self._throttle.info)(key, text)
 
     def _hand_off(self, sets) -> None:
         """Give the worker each matched frame (under self._lock); a frame it had not taken yet
@@ -607,16 +615,6 @@ class FcopNode(Node):
         except Refused as exc:
             return self._refuse_frame(exc.reason, str(exc))
         w, h = est.image_size
-        if est.mirrored:
-            with self._lock:
-                self.warnings["mirrored_nocs"] += len(est.mirrored)
-            self._throttle.warn(
-                "mirrored_nocs",
-                f"fcop_node: the NOCS of instance(s) {est.mirrored} fit their shape "
-                "only as a mirror image: is the nocs image's channel order right "
-                "(rgb8 vs bgr8), or its axis convention (parameter nocs_convention)? "
-                "The focal length is unaffected; no pose is published for them",
-            )
         with self._lock:
             if generation is not None and generation != self.worker.generation:
                 return False  # taken before a reset
@@ -625,31 +623,12 @@ class FcopNode(Node):
             self._newest_refusal = "" if est.focal is not None else _clipped(est.reason)
             self._no_focal_frames += est.focal is None
             self._proc_times.append(time.perf_counter() - t0)
-        win, ready, resized, stray = step.window, step.ready, step.resized_from, step.kept_size
-        if stray is not None:
-            self._reject("other_size_no_evidence")
-            self._throttle.warn(
-                "other_size_no_evidence",
-                f"fcop_node: dropped a {w}x{h} frame without focal evidence ({est.reason}); "
-                f"the window keeps its {stray[0]}x{stray[1]} frames",
-            )
-            return False
-        if est.focal is None:
-            self._reject("no_evidence")
-            self._throttle.warn(
-                "no_evidence", f"fcop_node: frame without focal evidence: {est.reason}"
-            )
-        if resized is not None:
-            self.get_logger().info(
-                f"fcop_node: image size changed from {resized[0]}x{resized[1]} to {w}x{h}: "
-                "new focal window"
-            )
-        if win.changed:
-            at = "no focal yet" if win.focal is None else f"{win.focal:.1f} px"
-            self.get_logger().info(
-                f"fcop_node: focal length changed (zoom?): window restarted, now at {at}"
-            )
-        if ready is None:
+            said = frame_outcome(est, step)
+            self.rejected.update(said.dropped)
+            self.warnings.update(said.warnings)
+        self._say(said.log)
+        win, ready = step.window, step.ready
+        if not said.kept or ready is None:
             return False
         # This frame's depth image arrived before there was an estimate: answer it now.
         with self._pub_lock:

@@ -1,0 +1,56 @@
+"""What one estimated frame did, in the node's words: plain Python, no rclpy.
+
+After the estimator thread has added a frame's FocalEstimate to the tracker, :func:`frame_outcome`
+says what to count (dropped frames under the names of the node's ``rejected`` counter, accepted
+input that deserved a word under ``warnings``) and what to log. The node only applies that, as it
+applies :class:`.intake.SyncStep` on the input side.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class FrameOutcome:
+    """``dropped``: reason -> frames dropped; ``warnings``: reason -> count; ``log``: (level,
+    throttle key, line), level 'warn' (throttled by key) or 'event' (said every time: a change
+    of image size, a zoom); ``kept``: whether the frame reached the window."""
+
+    dropped: Counter
+    warnings: Counter
+    log: tuple
+    kept: bool
+
+
+def frame_outcome(est, step) -> FrameOutcome:
+    """What FocalEstimate ``est`` and the tracker's :class:`.tracker.TrackStep` ``step`` mean."""
+    dropped, warnings, log = Counter(), Counter(), []
+    w, h = est.image_size
+    if est.mirrored:
+        warnings["mirrored_nocs"] += len(est.mirrored)
+        log.append(("warn", "mirrored_nocs",
+                    f"fcop_node: the NOCS of instance(s) {est.mirrored} fit their shape only as a "
+                    "mirror image: is the nocs image's channel order right (rgb8 vs bgr8), or its "
+                    "axis convention (parameter nocs_convention)? The focal length is "
+                    "unaffected; no pose is published for them"))
+    if step.kept_size is not None:
+        kw, kh = step.kept_size
+        dropped["other_size_no_evidence"] += 1
+        log.append(("warn", "other_size_no_evidence",
+                    f"fcop_node: dropped a {w}x{h} frame without focal evidence ({est.reason}); "
+                    f"the window keeps its {kw}x{kh} frames"))
+        return FrameOutcome(dropped, warnings, tuple(log), False)
+    if est.focal is None:
+        dropped["no_evidence"] += 1
+        log.append(("warn", "no_evidence",
+                    f"fcop_node: frame without focal evidence: {est.reason}"))
+    if step.resized_from is not None:
+        ow, oh = step.resized_from
+        log.append(("event", "resized", f"fcop_node: image size changed from {ow}x{oh} to "
+                                        f"{w}x{h}: new focal window"))
+    if step.window.changed:
+        at = "no focal yet" if step.window.focal is None else f"{step.window.focal:.1f} px"
+        log.append(("event", "zoom", "fcop_node: focal length changed (zoom?): window "
+                                     f"restarted, now at {at}"))
+    return FrameOutcome(dropped, warnings, tuple(log), True)
