@@ -393,8 +393,7 @@ def test_stamps_backwards_and_silent_topic(harness, capfd):
     # the log names the inputs dropped and the silent one they waited for
     err = capfd.readouterr().err
     assert "in the synchroniser: queue full (depth 1)" in err
-    assert ("nothing from mask to match them: silent, or later than queue_size (5) messages of "
-            "the others (raise queue_size to cover that delay times their rate)") in err
+    assert "nothing from mask for 6 s (stopped?)" in err, err
     assert h.node.sync.stats.matched == 1 and h.node.sync.pending() <= 2 * h.node.p["queue_size"]
     # A sustained jump back (a looped bag: three frames) resets the synchroniser and the window,
     # and uses the frames it held while waiting for the confirmation.

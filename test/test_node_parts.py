@@ -148,12 +148,27 @@ def test_intake_names_the_silent_input_and_queue_size_when_a_queue_overflows():
     steps = _steps(StampSynchronizer(3, queue_size=2),
                    [(0, 10 * SEC + k * FRAME_DT) for k in range(3)])
     assert [st.dropped for st in steps] == [{}, {}, {"sync_queue_full": 1}]
+    # Inputs that never sent are not told to raise queue_size (a trial's log said both).
     assert steps[2].log == (("warn", "sync_queue_full", (
-        "fcop_node: dropped 1 message(s) in the synchroniser: queue full (depth 1); nothing from "
-        "nocs and mask to match them: silent, or later than queue_size (2) messages of the "
-        "others (raise queue_size to cover that delay times their rate)")),)
+        "fcop_node: dropped 1 message(s) in the synchroniser: queue full (depth 1); nothing "
+        "received from nocs and mask yet (are they published, and the node's topics remapped "
+        "to theirs?)")),)
     assert not any(st.sets or st.jumped for st in steps)
     assert [len(st.accepted) for st in steps] == [1, 1, 1]  # each passed the stamp check
+
+
+def test_intake_tells_a_stopped_input_from_a_late_one():
+    """The mask sent once, then nothing: within SILENT_SECONDS it may only be late, and
+    queue_size is the hint; after them it is named as stopped."""
+    sync = StampSynchronizer(3, queue_size=2)
+    intake = Intake(sync, INPUT_NAMES)
+    first = [(2, 10 * SEC, 10.0)]  # a mask whose depth and NOCS never come
+    late = [(i, 10 * SEC + k * FRAME_DT, 10.0 + k / 30) for k in range(1, 4) for i in (0, 1)]
+    text = " ".join(t for st in _steps(None, first + late, intake) for _, _, t in st.log)
+    assert "nothing from mask to match them: silent, or later than queue_size (2)" in text
+    stopped = [(i, 10 * SEC + k * FRAME_DT, 16.0 + k / 30) for k in range(4, 7) for i in (0, 1)]
+    text = " ".join(t for st in _steps(None, stopped, intake) for _, _, t in st.log)
+    assert "nothing from mask for 6 s (stopped?)" in text and "raise queue_size" not in text
 
 
 def test_intake_counts_an_outlier_stamp_per_input_and_says_where_the_clock_was():

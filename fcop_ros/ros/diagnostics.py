@@ -15,10 +15,9 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
 from .gate import held_back
+from .intake import SILENT_SECONDS
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
-#: An input that sent nothing for this long (seconds) is called silent.
-SILENT_SECONDS = 5.0
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,8 @@ from .sync import StampSynchronizer
 
 #: A set matched this recently (seconds) means frames are flowing.
 FLOWING_SECONDS = 5.0
+#: An input that has sent nothing for this long (seconds) has stopped, not fallen behind.
+SILENT_SECONDS = 5.0
 #: An input that sent this many times the messages of the slowest one is a faster input.
 FASTER = 1.5
 
@@ -119,6 +121,28 @@ class Intake:
         return (f"{self.inputs[i]} comes {lag * 1000:.0f} ms after the {self.inputs[j]} of its "
                 f"stamp, at {rate:.0f} Hz: queue_size must be above {need:.1f}")
 
+    def _waiting_hint(self, waiting, now: float) -> str:
+        """Why the queued messages find nothing to match: inputs that never sent or stopped
+        (SILENT_SECONDS), else inputs later than the queue covers."""
+        names = [self.inputs[i] for i in waiting]
+        never = [self.inputs[i] for i in waiting if not self._arrivals[i]]
+        stopped = [(self.inputs[i], now - self._arrivals[i][-1][1]) for i in waiting
+                   if self._arrivals[i] and now - self._arrivals[i][-1][1] >= SILENT_SECONDS]
+        if len(never) + len(stopped) < len(waiting):
+            advice = self.queue_advice() or ("raise queue_size to cover that delay times "
+                                             "their rate")
+            return (f"; nothing from {' and '.join(names)} to match them: silent, or later than "
+                    f"queue_size ({self.sync.queue_size}) messages of the others ({advice})")
+        said = []
+        if never:
+            they = ("are they", "topics", "theirs") if len(never) > 1 else ("is it", "topic", "it")
+            said.append(f"nothing received from {' and '.join(never)} yet ({they[0]} published, "
+                        f"and the node's {they[1]} remapped to {they[2]}?)")
+        if stopped:
+            said.append(f"nothing from {' and '.join(n for n, _ in stopped)} for "
+                        f"{min(a for _, a in stopped):.0f} s (stopped?)")
+        return "; " + "; ".join(said)
+
     def add(self, index: int, stamp: int, msg, now: float) -> SyncStep:
         """Add ``msg`` (input ``index``, stamped ``stamp`` ns) at clock time ``now`` (s)."""
         sync, inputs, stats = self.sync, self.inputs, self.sync.stats
@@ -167,11 +191,7 @@ class Intake:
             self._said_flowing.discard(reason)
             hint = ""
             if reason == "queue_full" and waiting:
-                silent = " and ".join(inputs[i] for i in waiting)
-                advice = self.queue_advice() or ("raise queue_size to cover that delay times "
-                                                 "their rate")
-                hint = (f"; nothing from {silent} to match them: silent, or later than "
-                        f"queue_size ({sync.queue_size}) messages of the others ({advice})")
+                hint = self._waiting_hint(waiting, now)
             log.append(("warn", "sync_" + reason,
                         f"fcop_node: dropped {n} message(s) in the synchroniser: "
                         f"{reason.replace('_', ' ')} ({which}){hint}"))
