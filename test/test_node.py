@@ -727,3 +727,25 @@ def test_every_input_silent_warns_that_the_focal_is_an_old_one(harness):
     h.node._now = lambda: later
     st = h.node.diagnostic_status()
     assert st.level == DiagnosticStatus.WARN and "no input for 6." in st.message, st.message
+
+
+def test_a_change_of_health_is_said_in_the_log_once(harness, capfd):
+    """Left alone before: with every input stopped /diagnostics went WARN but the console
+    said nothing. A change of level is logged when it begins and when it ends; the start's
+    'no focal estimate yet' is not."""
+    h = harness()
+    h.node.publish_diagnostics()  # no frames yet: WARN, not news
+    assert h.frame(frame_messages(clean_frame(1), T0))
+    h.node.publish_diagnostics()
+    assert h.node.diagnostic_status().level == DiagnosticStatus.OK
+    later = time.monotonic() + 6.0
+    h.node._now = lambda: later
+    for _ in range(3):
+        h.node.publish_diagnostics()
+    h.node._now = time.monotonic
+    assert h.frame(frame_messages(clean_frame(1), T0 + DT))
+    h.node.publish_diagnostics()
+    err = capfd.readouterr().err
+    assert "no focal estimate yet" not in err
+    assert err.count("no input for 6.") == 1, err
+    assert err.count("healthy again: focal ") == 1, err

@@ -165,6 +165,8 @@ class FcopNode(Node):
         self._answers = DepthAnswers()  # under self._pub_lock
         self._cam_in: CameraInfo | None = None
         self._warned_distortion = False
+        self._health_level = None  # /diagnostics' last level, and whether a problem was logged
+        self._health_said = False
         self._rng = np.random.default_rng(None if self.p["seed"] < 0 else int(self.p["seed"]))
         self.intake = Intake(self._new_sync(), INPUTS)
         self.estimator_options = estimator_options(self.p)
@@ -788,7 +790,27 @@ class FcopNode(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.status = [self.diagnostic_status()]
         self.pub_diag.publish(msg)
+        self._log_health(msg.status[0])
         return msg
+
+    def _log_health(self, status: DiagnosticStatus) -> None:
+        """Say a change of /diagnostics' level in the log too, for whoever watches only the
+        console (the camera stopping said nothing there): a problem when it begins, and that it
+        is over once the status is OK again. The start's 'no focal estimate yet' is no news."""
+        level, before = status.level, self._health_level
+        self._health_level = level
+        if level == before or (before is None and level != DiagnosticStatus.ERROR):
+            return
+        if level == DiagnosticStatus.OK:
+            if self._health_said:
+                self._health_said = False
+                self.get_logger().info(f"fcop_node: healthy again: {status.message}")
+            return
+        self._health_said = True
+        if level == DiagnosticStatus.ERROR:
+            self.get_logger().error(f"fcop_node: {status.message}")
+        else:
+            self._throttle.warn("health", f"fcop_node: {status.message}")
 
     def destroy_node(self):
         if self.worker is not None:
