@@ -2,7 +2,7 @@
 
     python bench/world_accuracy.py [--frames 60] [--sequences 40] [--zoom-sequences 8]
         [--heldout | --heldout2 | --heldout3 | --heldout4 | --heldout5]
-        [--parts single bias window zoom preset_bias weights]
+        [--parts single bias window zoom preset_bias weights] [--objects N] [--set NAME=VALUE]
 
 Tuned rows use the seeds the estimator's few constants were chosen on (frames from seed 1000,
 sequences from seed 5000, the tuning error model). Held-out rows (--heldout) use seeds from
@@ -33,7 +33,9 @@ the window restarted at the zoom and how far the frames after it err themselves.
 (``--parts preset_bias``): fcop_ros's signed median over ``--bias-frames`` frames of each full
 preset, with its standard error. Weights (``--parts weights``): within a frame, how the
 objects' errors rank with their systematic and their noise variance, and the frame's error
-under either weighting.
+under either weighting. ``--objects N`` makes every scene one of N objects (1: the frames a
+single object gives, which no disagreement between objects can check); ``--set NAME=VALUE``
+tries other EstimatorOptions (the docs' figures use the defaults).
 """
 from __future__ import annotations
 
@@ -44,13 +46,18 @@ import numpy as np
 from scipy import ndimage
 
 from fcop_ros import FocalWindow, WindowOptions, estimate_focal, interval_stabbing, solve_triplets
-from fcop_ros.core import PAPER_FCOP_IS
+from fcop_ros.core import PAPER_FCOP_IS, EstimatorOptions
 from fcop_ros.core.camera import image_centre
 from fcop_ros.core.stabbing import focal_intervals
 from fcop_ros.synthetic.world import WORLD_PRESETS, ZERO_MEAN_FAMILIES, world_frame, world_frames
 from fcop_ros.tools.cli import HelpFormatter
 # bench/peers.py: the script's own folder is on the path when run as a script
 from peers import p4pf
+
+
+#: fcop_ros's settings (``--set``) and the scenes' object count (``--objects``; None: 1 to 6).
+OPTIONS = EstimatorOptions()
+OBJECTS = None
 
 
 def plain_reference(fr, rng):
@@ -107,7 +114,8 @@ def plain_reference(fr, rng):
 
 def methods(have_colmap):
     out = {
-        "fcop_ros": lambda fr, k: estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False),
+        "fcop_ros": lambda fr, k: estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False,
+                                                  options=OPTIONS),
         "paper's method taken literally": lambda fr, k: (
             estimate_focal(fr.depth, fr.nocs, fr.mask, options=PAPER_FCOP_IS, seed=k).focal
         ),
@@ -123,7 +131,8 @@ def single_frames(presets, frames, first_seed, variant, have_colmap):
           "coverage of 2 std_rel | median std_rel % | ms per frame |")
     print("|---|---|---|---|---|---|---|---|---|")
     for preset in presets:
-        data = [world_frame(preset, first_seed + s, variant) for s in range(frames)]
+        data = [world_frame(preset, first_seed + s, variant, objects=OBJECTS)
+                for s in range(frames)]
         for name, fn in methods(have_colmap).items():
             err, cover, std, t = [], [], [], 0.0
             for k, fr in enumerate(data):
@@ -166,8 +175,9 @@ def bias(frames, first_seed, variant):
     for fam in ZERO_MEAN_FAMILIES:
         err, cover = [], []
         for s in range(frames):
-            fr = world_frame(f"only_{fam}", first_seed + s, variant)
-            est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False)
+            fr = world_frame(f"only_{fam}", first_seed + s, variant, objects=OBJECTS)
+            est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False,
+                                 options=OPTIONS)
             if est.focal is not None:
                 e = np.log(est.focal / fr.focal)
                 err.append(100 * e)
@@ -187,8 +197,9 @@ def preset_bias(presets, frames, first_seed, variant):
     for preset in presets:
         err = []
         for s in range(frames):
-            fr = world_frame(preset, first_seed + s, variant)
-            est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False)
+            fr = world_frame(preset, first_seed + s, variant, objects=OBJECTS)
+            est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False,
+                                 options=OPTIONS)
             if est.focal is not None:
                 err.append(100 * np.log(est.focal / fr.focal))
         err = np.array(err)
@@ -211,8 +222,9 @@ def weights(presets, frames, first_seed, variant):
     for preset in presets:
         r_sys, r_noise, e_noise, e_total = [], [], [], []
         for s in range(frames):
-            fr = world_frame(preset, first_seed + s, variant)
-            est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False)
+            fr = world_frame(preset, first_seed + s, variant, objects=OBJECTS)
+            est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False,
+                                 options=OPTIONS)
             if est.focal is None:
                 continue
             f, std, noise = (np.array(c) for c in zip(*est.object_focals.values()))
@@ -229,11 +241,12 @@ def weights(presets, frames, first_seed, variant):
 
 def run_sequence(preset, seed, n, variant, zoom=1.0):
     seq = world_frames(preset, seed, n, variant, zoom_frame=n // 2 if zoom != 1.0 else None,
-                       zoom_factor=zoom)
+                       zoom_factor=zoom, objects=OBJECTS)
     win = FocalWindow(WindowOptions(max_frames=30))
     rows = []
     for k, fr in enumerate(seq.frames):
-        est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False)
+        est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False,
+                                 options=OPTIONS)
         w = win.add(est, k / 30)
         rows.append((fr.focal, est.focal, est.std_rel, w.focal, w.std_rel, w.changed))
     return rows
@@ -356,7 +369,22 @@ def main() -> None:
                     "what ranks the objects' errors within a frame, over --bias-frames frames")
     ap.add_argument("--bias-frames", type=int, default=2000,
                     help="frames per preset for preset_bias")
+    ap.add_argument("--objects", type=int, default=None,
+                    help="objects per scene (default: 1 to 6 at random)")
+    ap.add_argument("--set", nargs="+", default=[], metavar="NAME=VALUE",
+                    help="fcop_ros's EstimatorOptions other than the defaults, e.g. "
+                    "object_tau=0.03 (a trial; the figures in the docs use the defaults)")
     args = ap.parse_args()
+    global OPTIONS, OBJECTS
+    OBJECTS = args.objects
+    given = {}
+    for item in args.set:
+        name, _, value = item.partition("=")
+        default = getattr(EstimatorOptions(), name)
+        given[name] = type(default)(value)
+    OPTIONS = EstimatorOptions(**given)
+    if given or OBJECTS is not None:
+        print(f"settings: {given or 'defaults'}; objects per scene: {OBJECTS or '1 to 6'}\n")
     try:
         import pycolmap  # noqa: F401
         have_colmap = True
