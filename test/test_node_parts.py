@@ -672,6 +672,23 @@ def test_calibration_file_round_trips_through_yaml(tmp_path):
     assert [p.name for p in path.parent.iterdir()] == ["cam.yaml"]  # no temporary file left
 
 
+def test_save_calibration_says_where_and_what_or_why_not(tmp_path, monkeypatch):
+    """The service's outcome without a node: the path (calibration_file, else
+    camera_info_manager's default under $HOME), the message, and a refusal to write."""
+    from fcop_ros.ros.calibration import calibration_path, save_calibration
+    from msg_adapters import camera_info
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert calibration_path("", "front") == str(tmp_path / ".ros" / "camera_info" / "front.yaml")
+    assert calibration_path("~/x/cam.yaml", "front") == str(tmp_path / "x" / "cam.yaml")
+    info = camera_info(612.5, 319.5, 239.5, 640, 480)
+    ok, message = save_calibration(info, 0.0123, str(tmp_path / "c.yaml"), "front")
+    assert ok and message == f"saved focal 612.50 px (std_rel 0.0123) to {tmp_path / 'c.yaml'}"
+    (tmp_path / "file").write_text("")
+    ok, message = save_calibration(info, 0.0123, str(tmp_path / "file" / "c.yaml"), "front")
+    assert not ok and message.startswith(f"cannot write {tmp_path / 'file' / 'c.yaml'}: ")
+
+
 # ----- the intrinsics every CameraInfo carries
 
 

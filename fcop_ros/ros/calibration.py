@@ -11,6 +11,24 @@ def default_calibration_path(camera_name: str) -> str:
     return os.path.expanduser(os.path.join("~", ".ros", "camera_info", f"{camera_name}.yaml"))
 
 
+def calibration_path(calibration_file: str, camera_name: str) -> str:
+    """Where ~/save_calibration writes: ``calibration_file`` (``~`` expanded), else
+    camera_info_manager's default for ``camera_name``."""
+    if calibration_file:
+        return os.path.expanduser(calibration_file)
+    return default_calibration_path(camera_name)
+
+
+def save_calibration(info, std_rel: float, path: str, camera_name: str) -> tuple[bool, str]:
+    """Write CameraInfo ``info`` (its estimate's ``std_rel`` for the message) to ``path``:
+    (success, the service's message)."""
+    try:
+        write_calibration(path, info, camera_name)
+    except OSError as exc:
+        return False, f"cannot write {path}: {exc.strerror or exc}"
+    return True, f"saved focal {info.k[0]:.2f} px (std_rel {std_rel:.4f}) to {path}"
+
+
 def calibration_yaml(info, camera_name: str) -> str:
     """A sensor_msgs/CameraInfo as camera_calibration_parsers YAML."""
 

@@ -12,7 +12,6 @@ publishing never waits for the estimator, and the estimator never works on a bac
 from __future__ import annotations
 
 import dataclasses
-import os
 import sys
 import threading
 import time
@@ -41,7 +40,7 @@ from msg_adapters import marker_array, object_poses, pose_array, stamp_ns
 from ..core import compiled, estimate_poses
 from .allocator import limit_allocator_arenas
 from .answers import DepthAnswers
-from .calibration import default_calibration_path, write_calibration
+from .calibration import calibration_path, save_calibration
 from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
 from .frame_estimate import estimate_frame
@@ -681,11 +680,8 @@ class FcopNode(Node):
         return response
 
     def calibration_path(self) -> str:
-        """Where ~/save_calibration writes: calibration_file, else camera_info_manager's
-        default."""
-        if self.p["calibration_file"]:
-            return os.path.expanduser(self.p["calibration_file"])
-        return default_calibration_path(self.p["camera_name"])
+        """Where ~/save_calibration writes (see :func:`.calibration.calibration_path`)."""
+        return calibration_path(self.p["calibration_file"], self.p["camera_name"])
 
     def _on_save_calibration(self, request, response):
         with self._lock:
@@ -702,15 +698,12 @@ class FcopNode(Node):
         except IntrinsicsRefused as exc:
             response.message = str(exc)
             return response
-        path = self.calibration_path()
-        try:
-            write_calibration(path, info, p["camera_name"])
-        except OSError as exc:
-            response.message = f"cannot write {path}: {exc.strerror or exc}"
+        response.success, response.message = save_calibration(
+            info, est.std_rel, calibration_path(p["calibration_file"], p["camera_name"]),
+            p["camera_name"])
+        if not response.success:
             self.get_logger().error(f"fcop_node: calibration not saved: {response.message}")
             return response
-        response.success = True
-        response.message = f"saved focal {est.focal:.2f} px (std_rel {est.std_rel:.4f}) to {path}"
         if self.set_info_client is not None:
             if self.set_info_client.service_is_ready():
                 self.set_info_client.call_async(
