@@ -67,6 +67,25 @@ def test_loader_matches_the_nocs_conventions(dataset):
     assert abs(raw[iy, ix, 2] / 255 - fr.nocs[iy, ix, 0]) <= 0.5 / 255 + 1e-6
 
 
+def test_a_pixel_without_prediction_stays_without_one(tmp_path):
+    """A newcomer's review: the loader's flip made an all-zero coord pixel (no prediction) the
+    point (0, 0, 1) of the shape, where the node's nocs_dataset convention keeps it zero."""
+    from msg_adapters import depth_to_image, mask_to_image, nocs_to_image
+    from msg_adapters.input_images import frame_from_images
+
+    coord = np.full((4, 4, 3), 128, np.uint8)
+    coord[1, 2] = 0
+    cv2.imwrite(str(tmp_path / "x_coord.png"), coord)
+    nocs = ne.load_coord(tmp_path / "x_coord.png")
+    assert (nocs[1, 2] == 0).all() and nocs[0, 0, 2] == pytest.approx(1 - 128 / 255)
+    # The node reads the same pixels through nocs_convention 'nocs_dataset' alike.
+    rgb = (coord[:, :, ::-1] / 255.0).astype(np.float32)  # the PNG's values as RGB in [0, 1]
+    _, node_nocs, _ = frame_from_images(
+        depth_to_image(np.ones((4, 4), np.float32), "32FC1"), nocs_to_image(rgb, "rgb8"),
+        mask_to_image(np.ones((4, 4), np.uint8), "mono8"), nocs_convention="nocs_dataset")
+    np.testing.assert_allclose(node_nocs, nocs, atol=1e-6)
+
+
 def test_loaded_frames_give_focal_and_proper_poses(dataset):
     root, truth = dataset
     for prefix, fr in truth.items():

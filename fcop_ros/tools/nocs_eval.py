@@ -2,7 +2,8 @@
 
 A frame is a prefix P with P_mask.png, P_coord.png, P_depth.png and P_meta.txt (P_color.png is
 not needed). Conventions of the original NOCS loader, followed exactly:
-- coord: read as 8-bit BGR, reordered to RGB, divided by 255, z flipped (z = 1 - z);
+- coord: read as 8-bit BGR, reordered to RGB, divided by 255, z flipped (z = 1 - z; all-zero
+  pixels, no prediction, stay zero, as in the node's nocs_dataset convention);
 - mask: the third channel of the 8-bit image, 255 = background, other values instance ids;
 - depth: uint16 millimetres (REAL275), or 3 channels encoding depth = G * 256 + R with 32001
   meaning no depth (CAMERA25);
@@ -22,6 +23,8 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
+from msg_adapters.input_images import to_fcop_convention
 
 from .cli import from_ctrl_c
 
@@ -55,10 +58,11 @@ def _imread(path: Path, flags=cv2.IMREAD_UNCHANGED) -> np.ndarray:
 
 
 def load_coord(path: Path) -> np.ndarray:
-    """(H,W,3) float32 NOCS from a *_coord.png, as the NOCS loader does it."""
+    """(H,W,3) float32 NOCS from a *_coord.png, as the NOCS loader does it, but for all-zero
+    pixels: they stay zero (no prediction), as the node's ``nocs_convention: nocs_dataset``
+    keeps them, where the loader's flip made them (0, 0, 1), a point of the shape."""
     coord = _imread(path, cv2.IMREAD_COLOR)[:, :, (2, 1, 0)].astype(np.float32) / 255.0
-    coord[:, :, 2] = 1.0 - coord[:, :, 2]
-    return coord
+    return to_fcop_convention(coord)
 
 
 def load_mask(path: Path) -> np.ndarray:
