@@ -674,7 +674,23 @@ def test_frames_that_fail_count_as_frames_without_a_focal(harness, monkeypatch, 
     assert st.level == DiagnosticStatus.WARN, st.message
     assert "6 of the 9 frames" in st.message, st.message
     assert "(the newest: failed: RuntimeError: boom)" in st.message, st.message
-    assert "RuntimeError: boom" in capfd.readouterr().err
+    err = capfd.readouterr().err
+    assert "RuntimeError: boom" in err
+    assert err.count("the first failed frame's traceback") == 1 and "in broken" in err
+
+
+def test_frames_that_fail_from_the_start_are_not_called_no_frames(harness, monkeypatch):
+    """A hostile trial: with every frame failing from the start, /diagnostics said 'no
+    focal estimate yet: no frames yet' while frames_processed counted up."""
+    def broken(*args, **kwargs):
+        raise RuntimeError("boom")
+    monkeypatch.setattr("fcop_ros.ros.node.estimate_frame", broken)
+    h = harness()
+    for k in range(3):
+        assert h.frame(frame_messages(clean_frame(1), T0 + k * DT))
+    st = h.node.diagnostic_status()
+    assert ("no focal estimate yet: none of the 3 frames estimated reached the window; the "
+            "newest frame: failed: RuntimeError: boom") in st.message, st.message
 
 
 def test_after_a_reset_a_frame_of_another_size_is_no_stray(harness, capfd):
@@ -749,3 +765,23 @@ def test_a_change_of_health_is_said_in_the_log_once(harness, capfd):
     assert "no focal estimate yet" not in err
     assert err.count("no input for 6.") == 1, err
     assert err.count("healthy again: focal ") == 1, err
+
+
+def test_a_problem_under_the_start_up_warning_is_said_too(harness, capfd):
+    """A hostile trial: frames without evidence (empty masks), then the camera stopped. The
+    status stayed WARN 'no focal estimate yet' throughout, so neither /diagnostics nor the log
+    said the input had stopped."""
+    from dataclasses import replace
+
+    h = harness()
+    empty = replace(clean_frame(1), mask=np.zeros_like(clean_frame(1).mask))
+    for k in range(3):
+        assert h.frame(frame_messages(empty, T0 + k * DT))
+    h.node.publish_diagnostics()
+    later = time.monotonic() + 8.0
+    h.node._now = lambda: later
+    st = h.node.publish_diagnostics().status[0]
+    assert st.level == DiagnosticStatus.WARN and "no input for 8." in st.message, st.message
+    h.node.publish_diagnostics()
+    err = capfd.readouterr().err
+    assert err.count("no input for 8.") == 1, err

@@ -127,6 +127,9 @@ def test_help_prints_usage_and_does_not_start_the_node():
     ({"focal_min": 50.0, "focal_max": 10.0},
      "parameter focal_max=10.0 is not allowed: it must be above focal_min=50.0"),
     ({"camera_name": "my camera"}, "parameter camera_name='my camera' is not allowed"),
+    ({"set_camera_info_service": "{bad}"},
+     "parameter set_camera_info_service='{bad}' is not allowed: a service name (topic name "
+     "'{bad}' is invalid: unknown substitution: {bad})"),  # a traceback before (a trial)
     ({"set_camera_info_service": "cam//set_camera_info"},
      "parameter set_camera_info_service='cam//set_camera_info' is not allowed: a service name "
      "(topic name must not contain repeated '/')"),

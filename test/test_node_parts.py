@@ -532,7 +532,7 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "150 depth images in the last 5.0 s but no matched depth, NOCS and mask set",
         ),  # a reviewer stopped the NOCS topic: CameraInfo went on, diagnostics said OK
         (
-            {"window": WindowEstimate(None, reason="no frames yet"), "matched": 0,
+            {"window": WindowEstimate(None, reason="no frames yet"), "processed": 0, "matched": 0,
              "sync_dropped": 166, "rejected": {"sync_unmatched": 166}},
             Rates(5.0, 0, 0, 0),
             DiagnosticStatus.WARN,
@@ -550,7 +550,7 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "others' rate)",
         ),  # the same trial: NOCS and mask 300 ms late at 30 Hz, queue_size 5
         (
-            {"window": WindowEstimate(None, reason="no frames yet"), "matched": 0,
+            {"window": WindowEstimate(None, reason="no frames yet"), "processed": 0, "matched": 0,
              "sync_dropped": 399, "rejected": {"sync_queue_full": 399},
              "queue_advice": "nocs comes 250 ms after the depth of its stamp, at 30 Hz: "
                              "queue_size must be above 7.5"},
@@ -576,12 +576,31 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "or topics remapped?)",
         ),  # the same trial: every input stopped, diagnostics said OK for 20 s
         (
-            {"window": WindowEstimate(None, reason="no frames yet"),
+            {"window": WindowEstimate(None, reason="no frames yet"), "processed": 0,
              "input_ages": (("depth", 0.02), ("nocs", None), ("mask", None))},
             Rates(5.0, 0, 0, 0, answered=150),
             DiagnosticStatus.WARN,
             "no focal estimate yet: no frames yet",
         ),  # never heard from nocs and mask: the depth came only now, not silent yet
+        (
+            {"window": WindowEstimate(None, reason="no frames yet"), "processed": 0, "matched": 0,
+             "sync_dropped": 40, "rejected": {"sync_queue_full": 40},
+             "input_ages": (("depth", 0.01), ("nocs", 0.01), ("mask", None)),
+             "since_first_input": 12.0},
+            Rates(5.0, 0, 0, 0, answered=150),
+            DiagnosticStatus.WARN,
+            "no focal estimate yet: no frames yet; no depth, NOCS and mask set has matched: no "
+            "mask message for 12.0 s (silent, or its topic remapped elsewhere?)",
+        ),  # a hostile trial: the mask never sent, and for 12 s the advice was queue_size
+        (
+            {"window": WindowEstimate(None, reason="no frames yet"), "processed": 0,
+             "input_ages": (("depth", 8.0), ("nocs", 8.0), ("mask", 8.0)),
+             "since_first_input": 9.0},
+            Rates(5.0, 0, 0, 0),
+            DiagnosticStatus.WARN,
+            "no focal estimate yet: no frames yet; no input for 8.0 s (camera stopped, or "
+            "topics remapped?)",
+        ),  # the same trial: frames without evidence, then the camera stopped: never said
         (
             {"input_ages": (("depth", 0.01), ("nocs", 0.15), ("mask", 0.15))},
             Rates(5.0, 25, 25, 0, answered=150, inputs=(150, 25, 25)),

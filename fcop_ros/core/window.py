@@ -87,6 +87,10 @@ class WindowEstimate:
     reason: str = ""
 
 
+#: The reason of a window that has taken no frame since it was made.
+NO_FRAMES_YET = "no frames yet"
+
+
 @dataclass
 class _Frame:
     stamp: float
@@ -110,7 +114,7 @@ class FocalWindow:
             raise TypeError("FocalWindow takes a WindowOptions, e.g. "
                             "FocalWindow(WindowOptions(max_frames=30))")
         self._frames: deque[_Frame] = deque()
-        self.current = WindowEstimate(None, reason="no frames yet")
+        self.current = WindowEstimate(None, reason=NO_FRAMES_YET)
         self.changes = 0
 
     def __len__(self) -> int:

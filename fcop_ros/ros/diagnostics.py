@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
+from ..core.window import NO_FRAMES_YET
 from .gate import held_back
 from .intake import SILENT_SECONDS
 
@@ -57,6 +58,9 @@ class DiagnosticsInput:
     no_camera_info: str = ""
     # (input name, seconds since its last message, None before the first) for each image input.
     input_ages: tuple = ()
+    # Seconds since the first message of any input (None before it): how long an input that
+    # never sent has been silent.
+    since_first_input: float | None = None
     # The queue_size the inputs' measured delays need, when the queue is too short ('' else).
     queue_advice: str = ""
 
@@ -137,11 +141,20 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         message = ("no focal estimate yet: the estimator is preparing its kernels (the first run "
                    "on a machine compiles them, up to a minute)")
     elif win.focal is None:
-        level, message = WARN, f"no focal estimate yet: {win.reason}"
+        why = win.reason
+        if why == NO_FRAMES_YET and d.processed:
+            # Refused or failed frames never reach the window, which still says it has none.
+            why = f"none of the {d.processed} frames estimated reached the window"
+        level, message = WARN, f"no focal estimate yet: {why}"
         if d.last_reason:
             message += f"; the newest frame: {d.last_reason}"
-        if d.matched == 0 and d.sync_dropped > 0:
+        if silent and len(silent) == len(d.input_ages):
+            message += (f"; no input for {min(a for _, a in silent):.1f} s (camera stopped, or "
+                        "topics remapped?)")
+        elif d.matched == 0 and d.sync_dropped > 0:
             message += f"; no depth, NOCS and mask set has matched: {_sync_hint(d, silent)}"
+        elif silent:
+            message += f"; {_sync_hint(d, silent)}"
     elif silent and len(silent) == len(d.input_ages):
         level = WARN
         message = (f"focal {win.focal:.1f} px from an estimate {d.age or 0:.1f} s old: no input "
@@ -216,7 +229,7 @@ def _silent(d: DiagnosticsInput) -> list:
     heard = [age for _, age in d.input_ages if age is not None]
     if not heard:
         return []
-    since_first = max(heard)
+    since_first = max(heard) if d.since_first_input is None else d.since_first_input
     return [(name, since_first if age is None else age) for name, age in d.input_ages
             if (since_first if age is None else age) >= SILENT_SECONDS]
 

@@ -60,6 +60,7 @@ class Intake:
         self._arrivals = [deque(maxlen=128) for _ in self.inputs]
         self._when: list = [{} for _ in self.inputs]  # stamp -> clock time, the same messages
         self._lag: list = [None] * len(self.inputs)
+        self._first: float | None = None  # clock time of the first message of any input
 
     def _note_arrival(self, index: int, stamp: int, now: float) -> None:
         seen = self._arrivals[index]
@@ -94,6 +95,11 @@ class Intake:
         self.sync.configure(queue_size, slop)
         lost = self.sync.stats.dropped["queue_full"] - before
         return Counter({"sync_queue_full": lost} if lost else {})
+
+    def since_first(self, now: float) -> float | None:
+        """Seconds since the first message of any input at clock time ``now`` (None before it):
+        how long an input that never sent has been silent."""
+        return None if self._first is None else now - self._first
 
     def ages(self, now: float) -> tuple:
         """(input name, seconds since its last message at clock time ``now``, None before the
@@ -147,6 +153,8 @@ class Intake:
         """Add ``msg`` (input ``index``, stamped ``stamp`` ns) at clock time ``now`` (s)."""
         sync, inputs, stats = self.sync, self.inputs, self.sync.stats
         self.received[index] += 1
+        if self._first is None:
+            self._first = now
         self._note_arrival(index, stamp, now)
         before, before_inputs = Counter(stats.dropped), Counter(stats.per_input)
         resets = stats.resets

@@ -12,9 +12,11 @@ publishing never waits for the estimator, and the estimator never works on a bac
 from __future__ import annotations
 
 import dataclasses
+import re
 import sys
 import threading
 import time
+import traceback
 from collections import Counter, deque
 from dataclasses import dataclass
 
@@ -164,8 +166,8 @@ class FcopNode(Node):
         self._answers = DepthAnswers()  # under self._pub_lock
         self._cam_in: CameraInfo | None = None
         self._warned_distortion = False
-        self._health_level = None  # /diagnostics' last level, and whether a problem was logged
-        self._health_said = False
+        self._health_said = None  # the /diagnostics problem last logged (level, wording)
+        self._traceback_said = False
         self._rng = np.random.default_rng(None if self.p["seed"] < 0 else int(self.p["seed"]))
         self.intake = Intake(self._new_sync(), INPUTS)
         self.estimator_options = estimator_options(self.p)
@@ -260,8 +262,10 @@ class FcopNode(Node):
             return None
         try:
             return self.create_client(SetCameraInfo, name)
-        except InvalidServiceNameException as exc:
+        except (InvalidServiceNameException, ValueError) as exc:
+            # rclpy's words: a name it cannot take, or a substitution ({bad}) it does not know
             why = str(exc).splitlines()[0].removeprefix("Invalid service name: ").rstrip(":")
+            why = why.split(", at /")[0]  # rcl's source location
             raise ParameterError(not_allowed("set_camera_info_service", name,
                                              f"a service name ({why})")) from None
 
@@ -540,6 +544,11 @@ class FcopNode(Node):
             self._no_focal_frames += 1
             self._newest_refusal = _clipped(why)
         self._throttle.warn("exception", f"fcop_node: frame {item[0]} {why}")
+        if not self._traceback_said:  # once: what a bug report needs
+            self._traceback_said = True
+            self.get_logger().warning(
+                "fcop_node: the first failed frame's traceback (please report it):\n"
+                + "".join(traceback.format_exception(exc)).rstrip())
 
     def _reject(self, reason: str, n: int = 1) -> None:
         """Count dropped input; the worker and the executor thread both do, diagnostics reads."""
@@ -762,6 +771,7 @@ class FcopNode(Node):
                 last_reason=self._newest_refusal,
                 no_camera_info=no_camera_info,
                 input_ages=self.intake.ages(now),
+                since_first_input=self.intake.since_first(now),
                 queue_advice=self.intake.queue_advice(),
             )
             inputs = tuple(self.intake.received)
@@ -787,23 +797,27 @@ class FcopNode(Node):
         return msg
 
     def _log_health(self, status: DiagnosticStatus) -> None:
-        """Say a change of /diagnostics' level in the log too, for whoever watches only the
-        console (the camera stopping said nothing there): a problem when it begins, and that it
-        is over once the status is OK again. The start's 'no focal estimate yet' is no news."""
-        level, before = status.level, self._health_level
-        self._health_level = level
-        if level == before or (before is None and level != DiagnosticStatus.ERROR):
-            return
+        """Say /diagnostics' problems in the log too, for whoever watches only the console (the
+        camera stopping said nothing there): each problem once when it begins (a new level or
+        a new cause; its numbers may change), and that it is over once the status is OK again.
+        The start's plain 'no focal estimate yet' (no frames, kernels, too few frames) is no
+        news; with a cause after it (no input, nothing matched) it is."""
+        level, message = status.level, status.message
         if level == DiagnosticStatus.OK:
-            if self._health_said:
-                self._health_said = False
-                self.get_logger().info(f"fcop_node: healthy again: {status.message}")
+            if self._health_said is not None:
+                self._health_said = None
+                self.get_logger().info(f"fcop_node: healthy again: {message}")
             return
-        self._health_said = True
+        if message.startswith("no focal estimate yet") and ";" not in message:
+            return
+        cause = (level, re.sub(r"\d+(\.\d+)?", "#", message))
+        if cause == self._health_said:
+            return
+        self._health_said = cause
         if level == DiagnosticStatus.ERROR:
-            self.get_logger().error(f"fcop_node: {status.message}")
+            self.get_logger().error(f"fcop_node: {message}")
         else:
-            self._throttle.warn("health", f"fcop_node: {status.message}")
+            self._throttle.warn("health", f"fcop_node: {message}")
 
     def destroy_node(self):
         if self.worker is not None:
