@@ -2,7 +2,8 @@
 
     python bench/world_accuracy.py [--frames 60] [--sequences 40] [--zoom-sequences 8]
         [--heldout | --heldout2 | --heldout3 | --heldout4 | --heldout5]
-        [--parts single bias window zoom preset_bias weights] [--objects N] [--set NAME=VALUE]
+        [--parts single bias window zoom preset_bias weights tau] [--objects N]
+        [--set NAME=VALUE]
 
 Tuned rows use the seeds the estimator's few constants were chosen on (frames from seed 1000,
 sequences from seed 5000, the tuning error model). Held-out rows (--heldout) use seeds from
@@ -33,9 +34,11 @@ the window restarted at the zoom and how far the frames after it err themselves.
 (``--parts preset_bias``): fcop_ros's signed median over ``--bias-frames`` frames of each full
 preset, with its standard error. Weights (``--parts weights``): within a frame, how the
 objects' errors rank with their systematic and their noise variance, and the frame's error
-under either weighting. ``--objects N`` makes every scene one of N objects (1: the frames a
-single object gives, which no disagreement between objects can check); ``--set NAME=VALUE``
-tries other EstimatorOptions (the docs' figures use the defaults).
+under either weighting. Tau (``--parts tau``): the between-object spread that frames of two
+or more objects show, the rule ``object_tau`` was set by. ``--objects N`` makes every scene
+one of N objects (1: the frames a single object gives, which no disagreement between objects
+can check); ``--set NAME=VALUE`` tries other EstimatorOptions (the docs' figures use the
+defaults).
 """
 from __future__ import annotations
 
@@ -239,6 +242,33 @@ def weights(presets, frames, first_seed, variant):
               f"{100 * np.median(e_total):.2f} |", flush=True)
 
 
+def tau(presets, frames, first_seed, variant):
+    """The between-object spread that frames of two or more objects show beyond the objects'
+    own budgets: per frame the DerSimonian-Laird estimate over its combined objects (log f and
+    std_rel from ``object_focals``), then its root mean square over the frames (the prior
+    ``object_tau`` a frame of one object needs, for noisy NOCS where the fits lean on depth
+    one for one), its median and the share of frames with any."""
+    print("\n| preset | frames of 2+ objects | root mean square tau % | median tau % | "
+          "frames with tau > 0 |")
+    print("|---|---|---|---|---|")
+    for preset in presets:
+        t2 = []
+        for s in range(frames):
+            fr = world_frame(preset, first_seed + s, variant, objects=OBJECTS)
+            est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False,
+                                 options=OPTIONS)
+            if est.focal is None or len(est.object_focals) < 2:
+                continue
+            y = np.log([f for f, _, _ in est.object_focals.values()])
+            w = 1.0 / np.array([sd for _, sd, _ in est.object_focals.values()]) ** 2
+            m = np.sum(w * y) / w.sum()
+            q, c = np.sum(w * (y - m) ** 2), w.sum() - np.sum(w * w) / w.sum()
+            t2.append(max(0.0, (q - (y.size - 1)) / c) if c > 0 else 0.0)
+        t2 = np.array(t2)
+        print(f"| {preset} | {t2.size} | {100 * np.sqrt(t2.mean()):.2f} | "
+              f"{100 * np.sqrt(np.median(t2)):.2f} | {100 * np.mean(t2 > 0):.0f}% |", flush=True)
+
+
 def run_sequence(preset, seed, n, variant, zoom=1.0):
     seq = world_frames(preset, seed, n, variant, zoom_frame=n // 2 if zoom != 1.0 else None,
                        zoom_factor=zoom, objects=OBJECTS)
@@ -361,7 +391,8 @@ def main() -> None:
     held.add_argument("--heldout5", action="store_true",
                       help="the fifth held-out seeds and error model instead")
     ap.add_argument("--parts", nargs="+", default=["single", "bias", "window"],
-                    choices=["single", "bias", "window", "zoom", "preset_bias", "weights"],
+                    choices=["single", "bias", "window", "zoom", "preset_bias", "weights",
+                             "tau"],
                     help="zoom (not run by default): what keeps each zoom sequence from "
                     "settling, the restart or the frames themselves; preset_bias (not run by "
                     "default): fcop_ros's signed median over --bias-frames frames of each full "
@@ -416,6 +447,8 @@ def main() -> None:
         preset_bias(presets, args.bias_frames, frame_seed, variant)
     if "weights" in args.parts:
         weights(presets, args.bias_frames, frame_seed, variant)
+    if "tau" in args.parts:
+        tau(presets, args.frames, frame_seed, variant)
 
 
 if __name__ == "__main__":

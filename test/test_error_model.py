@@ -160,11 +160,12 @@ def test_one_wild_tilt_does_not_inflate_every_objects_budget():
     at the image's edge fitted with a tilt of 0.040 where the others read 0.001-0.003 (and a
     focal of 2559 px). Its tilt made the frame's depth-field curvature 5x larger and every
     object's budget with it: std_rel 10.3% for an error of 1.5%. Left out of the curvature, as
-    a tilt 5 times the median: std_rel 1.5%, the focal error 1.0%."""
+    a tilt 5 times the median: std_rel 1.5%, the focal error 1.0% (2.5% since the prior spread
+    between objects is the one their disagreement shows, object_tau 0.066)."""
     from fcop_ros.synthetic import SequenceSpec, camera_sequence
 
     spec = SequenceSpec(frames=1, preset="moderate", focal=600.0)
     (_, fr), = camera_sequence(spec, seed=1)
     est = estimate_focal(fr.depth, fr.nocs, fr.mask, poses=False, seed=0)
-    assert est.std_rel < 0.02 and abs(est.focal / 600.0 - 1) < 0.015, (est.focal, est.std_rel)
+    assert est.std_rel < 0.03 and abs(est.focal / 600.0 - 1) < 0.015, (est.focal, est.std_rel)
     assert abs(est.focal / 600.0 - 1) <= 2 * est.std_rel

@@ -385,11 +385,12 @@ def test_a_depth_offset_biases_the_focal_beyond_what_std_rel_says():
     """A known limit, as the README states it: an additive depth offset (or depth from a
     relative-depth network: scale and shift) moves f by about offset / distance, and no
     residual shows it. Measured on noisy_frame(5, 8, 11, 'mild'), objects ~0.7 m away: +0.05 m
-    gives +7.3 / +6.5 / +5.6% at std_rel 1.3 / 0.6 / 1.4%; 0.5 d + 0.3 gives +83 / +86 / +71% at
-    3.0 / 3.9 / 4.0%."""
+    gives +7.1 / +6.3 / +5.4% at std_rel 2.7 / 2.6 / 2.7%; 0.5 d + 0.3 gives +61 / +62 / +53% at
+    3.7 / 4.5 / 4.8% (with object_tau 0.066; at 0.005: +7.3 / +6.5 / +5.6% at 1.3 / 0.6 / 1.4%
+    and +83 / +86 / +71% at 3.0 / 3.9 / 4.0%: the wider prior keeps more objects together)."""
     for seed in (5, 8, 11):
         fr = noisy_frame(seed, "mild")
-        for depth, least in ((fr.depth + 0.05, 0.05), (0.5 * fr.depth + 0.3, 0.5)):
+        for depth, least, beyond in ((fr.depth + 0.05, 0.05, 1.8), (0.5 * fr.depth + 0.3, 0.5, 8)):
             est = estimate_focal(depth, fr.nocs, fr.mask, seed=1)
             err = np.log(est.focal / fr.focal)
-            assert err > least and err > 3 * est.std_rel, (seed, err, est.std_rel)
+            assert err > least and err > beyond * est.std_rel, (seed, err, est.std_rel)

@@ -29,13 +29,16 @@ import numpy as np
 @dataclass(frozen=True)
 class Combined:
     """mean: combined log f; var: its variance; noise: the part of var that the fits' noise
-    makes; tau2: between-object variance used; used: (n,) bool, the objects kept."""
+    makes; tau2: between-object variance used; used: (n,) bool, the objects kept; prior: the
+    part of var that the prior spread tau0^2 makes (all of tau2's part for one object, little
+    for many)."""
 
     mean: float
     var: float
     noise: float
     tau2: float
     used: np.ndarray
+    prior: float = 0.0
 
 
 def combine_objects(y, v, noise, tau0: float, nu0: float = 2.0,
@@ -69,7 +72,11 @@ def combine_objects(y, v, noise, tau0: float, nu0: float = 2.0,
     keep = np.flatnonzero(used).tolist()
     mean, var, var_noise, tau2 = _combine([yl[j] for j in keep], [vl[j] for j in keep],
                                           [nl[j] for j in keep], tau0, nu0)
-    return Combined(mean, var, var_noise, tau2, used)
+    # The prior's share of tau2, through the same weights as every object's variance.
+    wn = [1.0 / nl[j] for j in keep]
+    share = nu0 * tau0 ** 2 / (nu0 + len(keep) - 1)
+    prior = _sum([wi * wi for wi in wn]) * share / (_sum(wn) ** 2)
+    return Combined(mean, var, var_noise, tau2, used, min(prior, var - var_noise))
 
 
 def _combine(y: list, v: list, noise: list, tau0, nu0):

@@ -49,7 +49,9 @@ class FocalEstimate:
     ``reason`` says why). std_rel: relative standard error of focal (from the objects' fits and
     their disagreement). std_rel_noise: the part of std_rel that pixel noise makes, which a new
     frame draws anew (the rest, from shape mismatch, unseen depth error and the objects'
-    disagreement, repeats while the same objects are in view). focal_votes: the stabbed value of
+    disagreement, repeats while the same objects are in view). std_rel_prior: the part of
+    std_rel that stands in for the disagreement a frame of few objects cannot show (the prior
+    spread ``object_tau``; a frame of one object pays it whole). focal_votes: the stabbed value of
     the triplet votes. interval: (lo, hi) focal range in pixels of the maximal consensus region.
     inlier_count / inlier_ratio: votes agreeing with it. votes_per_object / inliers_per_object:
     {instance_id: count}. object_focals: {instance_id: (focal, std_rel, std_rel_noise)} of the
@@ -82,6 +84,7 @@ class FocalEstimate:
     focal_votes: float | None = None
     std_rel: float | None = None
     std_rel_noise: float | None = None
+    std_rel_prior: float | None = None
     votes_per_object: dict = field(default_factory=dict)
     inliers_per_object: dict = field(default_factory=dict)
     object_focals: dict = field(default_factory=dict)
@@ -673,6 +676,7 @@ def estimate_focal(
         if u and est.object_focals[inst.instance_id][1] <= opt.pose_max_std
     ]
     est.std_rel_noise = float(np.sqrt(comb.noise))
+    est.std_rel_prior = float(np.sqrt(max(comb.prior, 0.0)))
     combined = [inst for inst, u in zip(kept, comb.used) if u]
     return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var)), used, opt, rng, poses,
                    combined)

@@ -75,9 +75,10 @@ class EstimatorOptions:
     curvature of a smooth depth-error field, which the fit's tilt does not absorb, relative to
     the tilts it found, weighed by how much the object's fit leans on its depths),
     ``shape_error`` (per object, times the square root of its unexplained shape share beyond
-    what noise explains), and a prior between-object spread ``object_tau`` (the spread of the
-    depth network's relief errors, times the objects' rms derivative of log f by relief)
-    worth ``object_tau_weight`` objects. No pose for an object whose own std_rel exceeds
+    what noise explains), and a prior between-object spread ``object_tau`` (the spread that
+    objects of one frame show beyond their own budgets, times the objects' rms derivative of
+    log f by relief) worth ``object_tau_weight`` objects: a frame of one object, which no other
+    can contradict, pays it whole. No pose for an object whose own std_rel exceeds
     ``pose_max_std``.
 
     ``method``: "stabbing" (triplet votes and interval stabbing, as the paper's fCOP-IS, then
@@ -107,7 +108,10 @@ class EstimatorOptions:
     min_nocs_spread: float = 0.1
     unseen_depth_error: float = 0.3
     shape_error: float = 0.1
-    object_tau: float = 0.005
+    # The root-mean-square between-object spread (DerSimonian-Laird, at 0.005) of the tuning
+    # world's multi-object `predicted` frames: `python bench/world_accuracy.py --parts tau
+    # --set object_tau=0.005` (docs/BENCHMARKS.md).
+    object_tau: float = 0.066
     object_tau_weight: float = 2.0
     pose_max_std: float = 0.25
     method: str = "stabbing"
