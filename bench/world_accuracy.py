@@ -191,6 +191,14 @@ def bias(frames, first_seed, variant):
               f"{100 * np.mean(cover):.0f}% |", flush=True)
 
 
+def _estimates(preset, frames, first_seed, variant):
+    """(frame, fcop_ros's estimate) for each of ``frames`` frames of ``preset``."""
+    for s in range(frames):
+        fr = world_frame(preset, first_seed + s, variant, objects=OBJECTS)
+        yield fr, estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False,
+                                 options=OPTIONS)
+
+
 def preset_bias(presets, frames, first_seed, variant):
     """fcop_ros's signed median over many frames of each full preset, with its standard error:
     60 frames cannot tell a bias of a few tenths of a percent from chance."""
@@ -198,13 +206,9 @@ def preset_bias(presets, frames, first_seed, variant):
           "signed mean % | its standard error |")
     print("|---|---|---|---|---|---|")
     for preset in presets:
-        err = []
-        for s in range(frames):
-            fr = world_frame(preset, first_seed + s, variant, objects=OBJECTS)
-            est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False,
-                                 options=OPTIONS)
-            if est.focal is not None:
-                err.append(100 * np.log(est.focal / fr.focal))
+        err = [100 * np.log(est.focal / fr.focal)
+               for fr, est in _estimates(preset, frames, first_seed, variant)
+               if est.focal is not None]
         err = np.array(err)
         print(f"| {preset} | {err.size} | {np.median(err):+.2f} | "
               f"{_median_standard_error(err):.2f} | {np.mean(err):+.2f} | "
@@ -253,10 +257,7 @@ def tau(presets, frames, first_seed, variant):
     print("|---|---|---|---|---|")
     for preset in presets:
         t2 = []
-        for s in range(frames):
-            fr = world_frame(preset, first_seed + s, variant, objects=OBJECTS)
-            est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False,
-                                 options=OPTIONS)
+        for _, est in _estimates(preset, frames, first_seed, variant):
             if est.focal is None or len(est.object_focals) < 2:
                 continue
             y = np.log([f for f, _, _ in est.object_focals.values()])
