@@ -98,3 +98,25 @@ def test_design_owner_table_names_files_and_names_that_exist():
         wrong += [f"{path}: no {name}" for name in re.findall(r"`([A-Za-z_]\w*)`", owns)
                   if not re.search(rf"\b{name}\b", source)]
     assert not wrong, wrong
+
+
+def test_readme_lists_every_reason_the_node_counts_a_drop_by():
+    """The README's table of drop reasons (`rejected_<reason>` in /diagnostics) against the
+    reasons the code counts: the synchroniser's drops (sync_<reason>, outlier_stamp_<input>),
+    the refusals of a frame (Refused subclasses) and the node's own counters."""
+    from fcop_ros.ros.node import INPUTS
+
+    text = open(os.path.join(ROOT, "README.md")).read()
+    table = text.split("| case | reason counted |")[1].split("\n\n")[0]
+    documented = set(re.findall(r"`([a-z_]+)`", "\n".join(
+        row.rsplit("|", 2)[1] for row in table.splitlines()[2:])))
+    ros = os.path.join(ROOT, "fcop_ros", "ros")
+    code = "".join(open(os.path.join(ros, name)).read() for name in sorted(os.listdir(ros))
+                   if name.endswith(".py"))
+    counted = {f"sync_{r}" for r in re.findall(r'stats\.drop\("([a-z_]+)"', code)}
+    counted.discard("sync_outlier_stamp")
+    counted |= {f"outlier_stamp_{i}" for i in INPUTS}
+    counted |= set(re.findall(r'Refused\(\s*"([a-z_]+)"', code))
+    counted |= set(re.findall(r'(?<!stats\.)(?:rejected|dropped)\["([a-z_]+)"\]', code))
+    counted |= set(re.findall(r'_reject\("([a-z_]+)"', code))
+    assert documented == counted, (sorted(documented - counted), sorted(counted - documented))
