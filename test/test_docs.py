@@ -104,7 +104,7 @@ def test_readme_lists_every_reason_the_node_counts_a_drop_by():
     """The README's table of drop reasons (`rejected_<reason>` in /diagnostics) against the
     reasons the code counts: the synchroniser's drops (sync_<reason>, outlier_stamp_<input>),
     the refusals of a frame (Refused subclasses) and the node's own counters."""
-    from fcop_ros.ros.node import INPUTS
+    from fcop_ros.ros.topics import INPUTS
 
     text = open(os.path.join(ROOT, "README.md")).read()
     table = text.split("| case | reason counted |")[1].split("\n\n")[0]

@@ -11,7 +11,7 @@ MESSAGES = ("sensor_msgs", "geometry_msgs", "std_msgs", "visualization_msgs", "d
             "std_srvs", "rcl_interfaces", "builtin_interfaces", "rosgraph_msgs")
 PLAIN = ("worker", "sync", "throttle", "calibration", "dds", "config", "allocator",
          "command_line", "gate", "tracker", "answers", "intake", "frame_outcome")
-WITHOUT_RCLPY = ("params", "diagnostics", "intrinsics", "frame_estimate")
+WITHOUT_RCLPY = ("params", "diagnostics", "intrinsics", "frame_estimate", "topics")
 
 
 def _module(path: Path) -> str:

@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import InvalidServiceNameException, ParameterException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -35,7 +34,6 @@ from rclpy.qos_overriding_options import InvalidQosOverridesError, QoSOverriding
 from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
-from visualization_msgs.msg import MarkerArray
 
 from msg_adapters import marker_array, object_poses, pose_array, stamp_ns
 
@@ -71,10 +69,10 @@ from .params import (
 from .qos import input_qos, latched_qos, output_qos, refused_override, unknown_override_hint
 from .sync import StampSynchronizer
 from .throttle import LogThrottle
+from .topics import CAMERA_INFO_IN, INPUTS, OUTPUTS
 from .tracker import FocalTracker
 from .worker import LatestSlotWorker
 
-INPUTS = ("depth", "nocs", "mask")
 RCLError = _rclpy.RCLError
 
 
@@ -200,9 +198,9 @@ class FcopNode(Node):
     def _create_topics(self) -> None:
         """Subscriptions and publishers; a QoS override (a parameter rclpy declares as each is
         created) the node cannot run with is a ParameterError naming it."""
-        for topic in (*INPUTS, "camera_info_in"):
+        for topic in (*INPUTS, CAMERA_INFO_IN):
             self._check_qos_overrides(topic, "subscription")
-        for topic in ("camera_info", "object_poses", "object_markers"):
+        for topic in OUTPUTS:
             self._check_qos_overrides(topic, "publisher")
         try:
             self._create_topics_unchecked()
@@ -236,21 +234,15 @@ class FcopNode(Node):
         ]
         self.sub_info_in = self.create_subscription(
             CameraInfo,
-            "camera_info_in",
+            CAMERA_INFO_IN,
             self._on_camera_info_in,
             input_qos(),
             qos_overriding_options=qos_in,
         )
         qos_out = QoSOverridingOptions.with_default_policies()
-        self.pub_info = self.create_publisher(
-            CameraInfo, "camera_info", output_qos(), qos_overriding_options=qos_out
-        )
-        self.pub_poses = self.create_publisher(
-            PoseArray, "object_poses", output_qos(), qos_overriding_options=qos_out
-        )
-        self.pub_markers = self.create_publisher(
-            MarkerArray, "object_markers", output_qos(), qos_overriding_options=qos_out
-        )
+        self.pub_info, self.pub_poses, self.pub_markers = (
+            self.create_publisher(cls, topic, output_qos(), qos_overriding_options=qos_out)
+            for topic, cls in OUTPUTS.items())
         self.pub_latest = self._latched_publisher()
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
 

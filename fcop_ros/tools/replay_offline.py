@@ -95,7 +95,6 @@ def replay(
     params = node_parameters(params_file, overrides)
     use_large_image_profile()
     import rclpy
-    from geometry_msgs.msg import PoseArray
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
@@ -103,11 +102,11 @@ def replay(
     from rclpy.qos import qos_profile_sensor_data
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import CameraInfo, Image
-    from visualization_msgs.msg import MarkerArray
 
     from msg_adapters import stamp_ns
 
     from ..ros.node import FcopNode
+    from ..ros.topics import OUTPUTS, type_name
 
     inputs = {"depth": depth_topic, "nocs": nocs_topic, "mask": mask_topic}
     source = BagSource(bag)
@@ -162,25 +161,13 @@ def replay(
         pubs = {
             t: feeder.create_publisher(Image, t, qos_profile_sensor_data) for t in inputs.values()
         }
-        outputs = {
-            "camera_info": node.pub_info.topic_name,
-            "object_poses": node.pub_poses.topic_name,
-            "object_markers": node.pub_markers.topic_name,
-        }
-        types = {
-            "camera_info": INFO_TYPE,
-            "object_poses": "geometry_msgs/msg/PoseArray",
-            "object_markers": "visualization_msgs/msg/MarkerArray",
-        }
+        outputs = dict(zip(OUTPUTS, (p.topic_name for p in
+                                     (node.pub_info, node.pub_poses, node.pub_markers))))
+        types = {k: type_name(cls) for k, cls in OUTPUTS.items()}
         got: dict[str, list] = {k: [] for k in outputs}
         consumed = {k: 0 for k in outputs}
-        classes = {
-            "camera_info": CameraInfo,
-            "object_poses": PoseArray,
-            "object_markers": MarkerArray,
-        }
         subs = [
-            feeder.create_subscription(classes[k], t, got[k].append, 100, raw=True)
+            feeder.create_subscription(OUTPUTS[k], t, got[k].append, 100, raw=True)
             for k, t in outputs.items()
         ]
         executor.add_node(node)
