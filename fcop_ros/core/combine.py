@@ -61,8 +61,8 @@ def combine_objects(y, v, noise, tau0: float, nu0: float = 2.0,
         z = np.zeros(len(idx))
         for n, i in enumerate(idx):
             rest = [j for j in idx if j != i]
-            mean, var, _, tau2 = _combine([yl[j] for j in rest], [vl[j] for j in rest],
-                                          [nl[j] for j in rest], tau0, nu0)
+            mean, var, _, tau2, _ = _combine([yl[j] for j in rest], [vl[j] for j in rest],
+                                             [nl[j] for j in rest], tau0, nu0)
             z[n] = abs(yl[i] - mean) / math.sqrt(vl[i] + tau2 + var)
         if z.max() <= reject:
             break
@@ -70,18 +70,15 @@ def combine_objects(y, v, noise, tau0: float, nu0: float = 2.0,
     if not used.any():
         return None
     keep = np.flatnonzero(used).tolist()
-    mean, var, var_noise, tau2 = _combine([yl[j] for j in keep], [vl[j] for j in keep],
-                                          [nl[j] for j in keep], tau0, nu0)
-    # The prior's share of tau2, through the same weights as every object's variance.
-    wn = [1.0 / nl[j] for j in keep]
-    share = nu0 * tau0 ** 2 / (nu0 + len(keep) - 1)
-    prior = _sum([wi * wi for wi in wn]) * share / (_sum(wn) ** 2)
+    mean, var, var_noise, tau2, prior = _combine(
+        [yl[j] for j in keep], [vl[j] for j in keep], [nl[j] for j in keep], tau0, nu0)
     return Combined(mean, var, var_noise, tau2, used, min(prior, var - var_noise))
 
 
 def _combine(y: list, v: list, noise: list, tau0, nu0):
-    """(mean, var, noise var, tau2) of the estimates y with total variances v and noise
-    variances ``noise`` (lists of floats)."""
+    """(mean, var, noise var, tau2, prior var) of the estimates y with total variances v and
+    noise variances ``noise`` (lists of floats); prior var: the part of var that the prior's
+    share of tau2 makes, through the same weights as every object's variance."""
     k = len(y)
     w = [1.0 / vi for vi in v]
     sw = _sum(w)
@@ -92,11 +89,13 @@ def _combine(y: list, v: list, noise: list, tau0, nu0):
         c = sw - _sum([wi * wi for wi in w]) / sw
         tau2_dl = max(0.0, (q - (k - 1)) / c) if c > 0 else 0.0
     tau2 = (nu0 * tau0 ** 2 + (k - 1) * tau2_dl) / (nu0 + k - 1)
+    share = nu0 * tau0 ** 2 / (nu0 + k - 1)  # the prior's part of tau2
     wn = [1.0 / ni for ni in noise]
     swn = _sum(wn)
     mean = _sum([wi * yi for wi, yi in zip(wn, y)]) / swn
     var = _sum([wi * wi * (vi + tau2) for wi, vi in zip(wn, v)]) / (swn * swn)
-    return mean, var, 1.0 / swn, float(tau2)
+    prior = _sum([wi * wi for wi in wn]) * share / swn ** 2
+    return mean, var, 1.0 / swn, float(tau2), prior
 
 
 def _sum(a: list) -> float:

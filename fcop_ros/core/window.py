@@ -162,7 +162,7 @@ class FocalWindow:
         var = float(estimate.std_rel) ** 2 if ok else np.inf
         noise = estimate.std_rel_noise
         noise = min(float(noise) ** 2, var) if ok and noise is not None and noise > 0 else var
-        prior = getattr(estimate, "std_rel_prior", None)
+        prior = estimate.std_rel_prior
         prior = min(float(prior) ** 2, var - noise) if ok and prior else 0.0
         self._frames.append(
             _Frame(

@@ -149,16 +149,15 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         if d.last_reason:
             message += f"; the newest frame: {d.last_reason}"
         if silent and len(silent) == len(d.input_ages):
-            message += (f"; no input for {min(a for _, a in silent):.1f} s (camera stopped, or "
-                        "topics remapped?)")
+            message += f"; {_no_input(silent)}"
         elif d.matched == 0 and d.sync_dropped > 0:
             message += f"; no depth, NOCS and mask set has matched: {_sync_hint(d, silent)}"
         elif silent:
             message += f"; {_sync_hint(d, silent)}"
     elif silent and len(silent) == len(d.input_ages):
         level = WARN
-        message = (f"focal {win.focal:.1f} px from an estimate {d.age or 0:.1f} s old: no input "
-                   f"for {min(a for _, a in silent):.1f} s (camera stopped, or topics remapped?)")
+        message = (f"focal {win.focal:.1f} px from an estimate {d.age or 0:.1f} s old: "
+                   f"{_no_input(silent)}")
     elif not d.publishable:
         level = WARN
         message = (held_back(win, d.max_uncertainty, d.focal_range)
@@ -232,6 +231,12 @@ def _silent(d: DiagnosticsInput) -> list:
     since_first = max(heard) if d.since_first_input is None else d.since_first_input
     return [(name, since_first if age is None else age) for name, age in d.input_ages
             if (since_first if age is None else age) >= SILENT_SECONDS]
+
+
+def _no_input(silent: list) -> str:
+    """What every input being silent means (``silent``: :func:`_silent`'s, all inputs)."""
+    return (f"no input for {min(a for _, a in silent):.1f} s (camera stopped, or topics "
+            "remapped?)")
 
 
 def _slowest_lost(d: DiagnosticsInput, rates: Rates):

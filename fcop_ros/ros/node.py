@@ -284,8 +284,9 @@ class FcopNode(Node):
         overrides = getattr(self, "_parameter_overrides", {})
         for name in PARAMETERS:
             given = overrides.get(name)
-            if given is not None and as_declared(name, given.value) is not given.value:
-                overrides[name] = Parameter(name, value=as_declared(name, given.value))
+            value = None if given is None else as_declared(name, given.value)
+            if given is not None and value is not given.value:  # focal_min:=300 means 300.0
+                overrides[name] = Parameter(name, value=value)
             try:
                 declared = self.declare_parameter(name, PARAMETERS[name].default, descriptor(name))
             except ParameterException:
