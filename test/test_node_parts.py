@@ -282,6 +282,18 @@ def test_intake_takes_a_slower_nocs_network_as_flow_and_warns_when_it_goes_silen
     assert "nothing from nocs and mask" in _lines(steps, "warn")["sync_queue_full"]
 
 
+def test_intake_reset_forgets_that_frames_were_flowing():
+    """After ~/reset (or a jump) no frame has matched since: the depth images the queue then
+    drops are a WARN at once, not the flow the INFO line described before the reset."""
+    intake = Intake(StampSynchronizer(3, queue_size=10), INPUT_NAMES)
+    steps = _steps(None, _slow_network(120, lambda k: 0.25), intake)
+    assert "sync_flowing_queue_full" in _lines(steps, "info")
+    intake.reset()
+    later = [(0, (200 + k) * FRAME_DT, 4.1 + k / 30) for k in range(12)]
+    after = _steps(None, later, intake)
+    assert "sync_queue_full" in _lines(after, "warn") and not _lines(after, "info")
+
+
 # ----- one frame's messages to its estimate
 
 

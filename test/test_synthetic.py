@@ -210,12 +210,14 @@ def test_fifth_heldout_model_errs_in_tiles_parts_and_hulls():
     instance fills its hull; tuning-model masks of the same frames leave concavities)."""
     import cv2
 
-    from fcop_ros.synthetic.world import ErrorFamilies, _grid_field, _tile_field, world_frame
+    from fcop_ros.synthetic.world import (_FIELDS, ErrorFamilies, _grid_field, _tile_field,
+                                          world_frame)
 
     rng = np.random.default_rng(0)
     flat = [np.mean(np.hypot(*np.gradient(f(rng, 120, 160, 2))) < 1e-3)
             for f in (_tile_field, _grid_field)]
     assert flat[0] > 0.7 and flat[1] < 0.01, flat
+    assert _FIELDS["heldout5"] is _tile_field
     clean = world_frame(ErrorFamilies(), 5, "heldout5")
     shifted = world_frame(ErrorFamilies(nocs_field=0.03), 5, "heldout5")
     for iid in np.unique(clean.mask[clean.mask > 0]):
