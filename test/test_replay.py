@@ -189,7 +189,7 @@ def test_unsupported_encoding_and_no_matching_frames(tmp_path, capsys):
             str(tmp_path / "o")]
     assert rp.main([str(bag)] + args) == 2
     assert (
-        "depth topic: unsupported encoding 'mono8'; supported: 32FC1, 64FC1, 16UC1"
+        "depth topic '/d': unsupported encoding 'mono8'; supported: 32FC1, 64FC1, 16UC1"
         in capsys.readouterr().err
     )
     # Depth and mask never share a stamp: nothing matches, the replay says so.
@@ -360,7 +360,7 @@ def test_play_on_a_truncated_bag_reports_the_damage(tmp_path, capsys):
     assert "fcop_replay: no subscriber on " in err and ": playing anyway" in err
     published = int(out.split()[1])
     assert code == 3 and 3 <= published < 24
-    assert f"fcop_replay: bag damaged ({f.name} unreadable after this point" in err
+    assert f"fcop_replay: bag damaged ({f.name} unreadable after its " in err
     assert f"played the {published} messages before the damage" in err
 
 

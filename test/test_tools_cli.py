@@ -216,8 +216,8 @@ def test_make_bag_and_replay_interrupted_say_so(tmp_path, capsys, monkeypatch):
     code = rp.main([str(tmp_path / "b"), "--depth-topic", "/d", "--nocs-topic", "/n",
                     "--mask-topic", "/m", "--out", str(tmp_path / "o")])
     assert code == 130, capsys.readouterr().err
-    assert capsys.readouterr().err == (
-        "fcop_replay: interrupted; the outputs hold what was estimated before\n")
+    assert capsys.readouterr().err == (  # interrupted before it wrote anything
+        "fcop_replay: interrupted before --out was written: nothing written\n")
     monkeypatch.setattr(rp, "play", interrupted)  # --play writes no outputs: none to speak of
     assert rp.main([str(tmp_path / "b"), "--depth-topic", "/d", "--nocs-topic", "/n",
                     "--mask-topic", "/m", "--play"]) == 130

@@ -29,6 +29,17 @@ class BagError(RuntimeError):
     """A bag that cannot be used as asked; the message says why and what the bag holds."""
 
 
+# Errors whose text is empty, said in words.
+_SILENT_ERRORS = {"EndOfFile": "truncated: the file ends in the middle of a record"}
+
+
+def error_text(exc: BaseException) -> str:
+    """'Type: text' of a reading error, or what it means when its text is empty (mcap's
+    EndOfFile has none: a note ended in '(EndOfFile: )')."""
+    name, text = type(exc).__name__, str(exc).strip()
+    return f"{name}: {text}" if text else _SILENT_ERRORS.get(name, name)
+
+
 def typestore():
     """The rosbags type store of the ROS distribution in use (message definitions and hashes)."""
     return get_typestore(Stores.ROS2_JAZZY if ros_distro() == "jazzy" else Stores.ROS2_KILTED)
@@ -169,9 +180,14 @@ class BagSource:
         from mcap.stream_reader import StreamReader
 
         for file in self._mcap:
-            schemas, channels = {}, {}
+            schemas, channels, n = {}, {}, 0
             try:
-                with open(file, "rb") as fh:
+                fh = open(file, "rb")
+            except OSError as exc:
+                self.damaged = f"{file.name} unreadable ({exc.strerror or error_text(exc)})"
+                return
+            with fh:
+                try:
                     for rec in StreamReader(fh).records:
                         if isinstance(rec, Schema):
                             schemas[rec.id] = rec.name
@@ -179,11 +195,14 @@ class BagSource:
                             channels[rec.id] = (rec.topic, schemas.get(rec.schema_id, ""))
                         elif isinstance(rec, Message) and rec.channel_id in channels:
                             topic, msgtype = channels[rec.channel_id]
+                            n += 1
                             yield topic, msgtype, rec.log_time, rec.data
-            except Exception as exc:  # the damage: stop here, say where
-                self.damaged = (f"{file.name} unreadable after this point "
-                                f"({type(exc).__name__}: {exc})")
-                return
+                except Exception as exc:  # the damage: stop here, say where
+                    pos, size = fh.tell(), file.stat().st_size
+                    at = f"its end, byte {size}" if pos >= size else f"byte {pos} of {size}"
+                    self.damaged = (f"{file.name} unreadable after its {n} messages, at {at} "
+                                    f"({error_text(exc)})")
+                    return
 
     def _scan_mcap(self):
         topics, counts = {}, {}

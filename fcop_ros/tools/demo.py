@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from .cli import HelpFormatter
-from .make_bag import TOPICS, make_bag
+from .make_bag import MAX_SEED, TOPICS, check_seed_and_size, make_bag
 from .replay_offline import replay
 from ..synthetic import PRESETS, SequenceSpec
 
@@ -18,8 +18,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="fcop_demo", description=__doc__,
                                  formatter_class=HelpFormatter,
                                  epilog="exit codes:\n  0   done\n  1   nothing was estimated\n"
-                                        "  2   unusable arguments, or the bag or the outputs "
-                                        "could not be written")
+                                        "  2   unusable arguments (nothing is written), or the "
+                                        "bag or the outputs could not be written\n"
+                                        "  130 interrupted (Ctrl-C)")
     ap.add_argument("--out", default="out/demo",
                     help="directory for the bag and the replay outputs")
     ap.add_argument("--frames", type=int, default=60, help="number of frames (640x480 at 30 Hz)")
@@ -29,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--zoom-focal", type=float, default=750.0,
                     help="true focal length after the zoom at 2/3 of the frames, pixels")
     ap.add_argument("--seed", type=int, default=0,
-                    help="seed of the scene and of the node's triplet sampling")
+                    help=f"seed of the scene and of the node's triplet sampling (0..{MAX_SEED})")
     return ap
 
 
@@ -44,6 +45,7 @@ def main(argv=None) -> int:
     try:
         spec = SequenceSpec(args.frames, 640, 480, args.focal, zoom_frame, args.zoom_focal,
                             args.preset)
+        check_seed_and_size(args.seed, 640, 480)
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out} exists and is not a directory")
         if bag.exists():

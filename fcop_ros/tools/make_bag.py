@@ -13,6 +13,7 @@ import argparse
 import math
 import sys
 import time
+from pathlib import Path
 
 from msg_adapters import (DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS, camera_info,
                           depth_to_image, header_from_ns, mask_to_image, nocs_to_image,
@@ -42,6 +43,20 @@ def _stamp_step(rate: float, frames: int, start_ns: int) -> int:
         raise ValueError(f"--rate {rate:g} Hz spreads {frames} frames beyond 2038, where a ROS "
                          "stamp's int32 seconds end")
     return step
+
+
+MAX_SIDE = 8192  # pixels per side: beyond it a frame's float images need gigabytes
+MAX_SEED = 2**31 - 1  # the node's `seed` parameter range, which fcop_demo passes it to
+
+
+def check_seed_and_size(seed: int, width: int, height: int) -> None:
+    """ValueError for a seed outside 0..MAX_SEED (numpy refuses a negative one, after the bag
+    was created) or an image side above MAX_SIDE (a MemoryError traceback)."""
+    if not 0 <= seed <= MAX_SEED:
+        raise ValueError(f"--seed must be an integer in [0, {MAX_SEED}], got {seed}")
+    for name, side in (("--width", width), ("--height", height)):
+        if side > MAX_SIDE:
+            raise ValueError(f"{name} {side} is too large: at most {MAX_SIDE} pixels per side")
 
 
 def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0,
@@ -76,8 +91,8 @@ def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0,
 
 EXIT_CODES_TEXT = """exit codes:
   0   done
-  2   unusable arguments (the bag exists; a bad size, focal length, rate or zoom) or the
-      bag cannot be written
+  2   unusable arguments (the bag exists; a bad size, seed, focal length, rate or zoom)
+      or the bag cannot be written; nothing is written
   130 interrupted (Ctrl-C); the partial bag is left behind"""
 
 
@@ -88,7 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--frames", type=int, default=60, help="number of frames")
     ap.add_argument("--rate", type=float, default=30.0, help="frames per second (stamp spacing)")
     ap.add_argument("--seed", type=int, default=0,
-                    help="seed of the scene, its motion and its noise")
+                    help=f"seed of the scene, its motion and its noise (0..{MAX_SEED})")
     ap.add_argument("--preset", default="moderate", choices=sorted(PRESETS),
                     help="noise preset imitating learned depth and NOCS predictors")
     ap.add_argument("--focal", type=float, default=600.0, help="true focal length, pixels")
@@ -97,8 +112,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "default: no zoom)")
     ap.add_argument("--zoom-focal", type=float, default=None,
                     help="focal length from --zoom-frame on, pixels (default: no zoom)")
-    ap.add_argument("--width", type=int, default=640, help="image width, pixels")
-    ap.add_argument("--height", type=int, default=480, help="image height, pixels")
+    ap.add_argument("--width", type=int, default=640,
+                    help=f"image width, pixels (8..{MAX_SIDE})")
+    ap.add_argument("--height", type=int, default=480,
+                    help=f"image height, pixels (8..{MAX_SIDE})")
     ap.add_argument("--objects", type=int, default=5, help="objects in the scene")
     ap.add_argument("--storage", default="mcap", choices=sorted(STORAGES),
                     help="rosbag2 storage plugin")
@@ -119,6 +136,7 @@ def main(argv=None) -> int:
         spec = SequenceSpec(args.frames, args.width, args.height, args.focal, args.zoom_frame,
                             args.zoom_focal, args.preset, args.objects)
         _stamp_step(args.rate, spec.frames, START_NS)
+        check_seed_and_size(args.seed, args.width, args.height)
     except ValueError as exc:
         print(f"fcop_make_bag: {exc}", file=sys.stderr)
         return 2
@@ -136,8 +154,11 @@ def main(argv=None) -> int:
         print(f"fcop_make_bag: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"fcop_make_bag: interrupted; {args.out} holds the frames written before",
-              file=sys.stderr)
+        # The bag did not exist before (BagWriter refuses one that does): if it does now, it
+        # is this run's.
+        kept = (f"{args.out} holds the frames written before" if Path(args.out).exists()
+                else "nothing written")
+        print(f"fcop_make_bag: interrupted; {kept}", file=sys.stderr)
         return 130
     finally:
         if bar is not None:

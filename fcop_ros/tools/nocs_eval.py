@@ -51,6 +51,9 @@ def parse_intrinsics(text: str):
 
 
 def _imread(path: Path, flags=cv2.IMREAD_UNCHANGED) -> np.ndarray:
+    # Checked first: OpenCV's imread warns on stderr of a missing file, beside our own word.
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"image not found: {path}")
     img = cv2.imread(str(path), flags)
     if img is None:
         raise FileNotFoundError(f"cannot read image {path}")
@@ -151,7 +154,8 @@ CSV_FIELDS = ["scene", "frame", "focal_true", "focal", "error_pct", "objects", "
 def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None,
              use_principal_point=True, progress=None, options=None):
     """Estimate every frame (with ``options``, an EstimatorOptions; default fcop_ros's); return
-    (rows, per-scene medians) and write the per-frame CSV."""
+    (rows, per-scene medians) and write the per-frame CSV. ``progress(done, total)`` is called
+    once the CSV is open (done 0) and after every frame's row."""
     from ..core import estimate_focal
 
     root = Path(root)
@@ -165,11 +169,17 @@ def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None,
     rows = []
     # Opened first and written row by row: a --csv that cannot be written fails before hours of
     # estimation, and an interrupted run keeps the frames before.
-    fh = None if out_csv is None else open(out_csv, "w", newline="")
+    try:
+        fh = None if out_csv is None else open(out_csv, "w", newline="")
+    except OSError as exc:
+        raise OSError(f"cannot write --csv {out_csv}: {exc.strerror or exc}") from None
     try:
         writer = None if fh is None else csv.DictWriter(fh, fieldnames=CSV_FIELDS)
         if writer is not None:
             writer.writeheader()
+            fh.flush()
+        if progress:
+            progress(0, len(frames))
         for n, prefix in enumerate(frames):
             rel = prefix.relative_to(root)
             scene = str(rel.parent) if str(rel.parent) != "." else root.name
@@ -218,8 +228,8 @@ def build_parser() -> argparse.ArgumentParser:
                                         "read is a CSV row with its reason)\n"
                                         "  2   unusable input (missing "
                                         "directory, no frame, bad --intrinsics, a --csv that "
-                                        "cannot be written)\n  130 interrupted (the CSV "
-                                        "holds the frames before)")
+                                        "cannot be written)\n  130 interrupted (the CSV, "
+                                        "if it was opened, holds the frames before)")
     ap.add_argument("dir", help="dataset directory (scenes of *_mask.png, *_coord.png, "
                                 "*_depth.png, *_meta.txt)")
     ap.add_argument("--intrinsics", required=True,
@@ -233,8 +243,22 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _quiet_opencv() -> None:
+    """OpenCV's own warnings off stderr (an unreadable image is a CSV row with its reason)."""
+    try:
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    except AttributeError:  # an OpenCV build without its logging module
+        pass
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    done = []  # [(frames done, frames)] once the CSV is open: what Ctrl-C leaves
+
+    def progress(n, total):
+        done[:] = [(n, total)]
+
+    _quiet_opencv()
     try:
         intr = parse_intrinsics(args.intrinsics)
         depth_dir = None if args.depth == "sensor" else Path(args.depth)
@@ -244,7 +268,7 @@ def main(argv=None) -> int:
                 raise FileNotFoundError(f"{what} directory not found: {d}")
         t0 = time.perf_counter()
         rows, summary = evaluate(args.dir, intr, depth_dir, nocs_dir, args.csv,
-                                 not args.image_centre)
+                                 not args.image_centre, progress=progress)
     # OSError: missing input, or a --csv that cannot be written
     except (OSError, ValueError) as exc:
         print(f"fcop_eval_nocs: {exc}", file=sys.stderr)
@@ -252,8 +276,9 @@ def main(argv=None) -> int:
     except (KeyboardInterrupt, SystemError) as exc:
         if not from_ctrl_c(exc):  # Ctrl-C inside a compiled kernel: numba's SystemError
             raise
-        print(f"fcop_eval_nocs: interrupted; {args.csv} holds the frames before",
-              file=sys.stderr)
+        kept = (f"{args.csv} holds the {done[0][0]} of {done[0][1]} frames done before"
+                if done else f"{args.csv} not written")
+        print(f"fcop_eval_nocs: interrupted; {kept}", file=sys.stderr)
         return 130
     print(f"{len(rows)} frames in {time.perf_counter() - t0:.1f} s; median |focal error| per "
           f"scene (frames with an estimate / frames):\n")

@@ -20,14 +20,17 @@ import sys
 
 from .bagio import BagError
 from .cli import HelpFormatter
-from .replay_base import OutputError, ReplayError
+from .replay_base import OutputError, ReplayError, ReplaySummary
 from .replay_offline import replay
 from .replay_play import play
 
 EXIT_OK, EXIT_NOTHING, EXIT_INPUT, EXIT_DAMAGED, EXIT_OUTPUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
 EXIT_CODES = {
     EXIT_OK: "done",
-    EXIT_NOTHING: "nothing was estimated (the topics never matched or gave no evidence)",
+    EXIT_NOTHING: (
+        "no CameraInfo was published: the topics never matched or gave no evidence, or every "
+        "estimate was held back by max_uncertainty or focal_min..focal_max"
+    ),
     EXIT_INPUT: (
         "unusable input or arguments: missing bag or one that cannot be opened at all, unknown "
         "topic, wrong type, unsupported encoding, unknown parameter name, invalid parameter "
@@ -150,6 +153,7 @@ def main(argv=None) -> int:
         print(f"fcop_replay: {', '.join(ignored)} "
               f"{'apply' if len(ignored) > 1 else 'applies'} only "
               f"{'without' if args.play else 'with'} --play: ignored", file=sys.stderr)
+    summary = ReplaySummary()  # filled as the offline run goes: what Ctrl-C leaves
     try:
         if args.play:
             res = play(
@@ -175,7 +179,7 @@ def main(argv=None) -> int:
                 )
                 return EXIT_DAMAGED
             return EXIT_OK
-        summary = replay(
+        replay(
             args.bag,
             args.depth_topic,
             args.nocs_topic,
@@ -185,6 +189,7 @@ def main(argv=None) -> int:
             params_file=args.params_file,
             overrides=args.overrides,
             out_storage=args.out_storage,
+            summary=summary,
         )
     except OutputError as exc:
         print(f"fcop_replay: {exc}", file=sys.stderr)
@@ -193,20 +198,43 @@ def main(argv=None) -> int:
         print(f"fcop_replay: {exc}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:
-        print("fcop_replay: interrupted" + ("" if args.play else
-                                           "; the outputs hold what was estimated before"),
-              file=sys.stderr)
+        print(f"fcop_replay: {_interrupted(args, summary)}", file=sys.stderr)
         return EXIT_INTERRUPTED
     print(summary.text())
     if summary.frames_read and not summary.frames_estimated:
-        print(
-            "fcop_replay: no frame was estimated: the three topics never matched or gave no "
-            "evidence "
-            "(see 'rejected inputs')",
-            file=sys.stderr,
-        )
+        print(f"fcop_replay: {_nothing_published(summary)}", file=sys.stderr)
         return EXIT_NOTHING
-    return EXIT_DAMAGED if summary.damaged else EXIT_OK
+    if summary.damaged:
+        print(f"fcop_replay: bag damaged: {summary.damaged}; the outputs hold the "
+              f"{summary.frames_estimated} estimates of the {summary.frames_read} frames read "
+              "before", file=sys.stderr)
+        return EXIT_DAMAGED
+    return EXIT_OK
+
+
+def _interrupted(args, summary: ReplaySummary) -> str:
+    """The Ctrl-C line: what was written, only if something was."""
+    if args.play:
+        return "interrupted"
+    if not summary.out_dir:
+        return "interrupted before --out was written: nothing written"
+    return (f"interrupted after {summary.frames_read} frames; {summary.out_dir} holds what "
+            f"was estimated before ({summary.csv_rows} rows in estimates.csv)")
+
+
+def _nothing_published(summary: ReplaySummary) -> str:
+    """Why no CameraInfo came out: estimates held back by the publish gate (with the option
+    that lets them through), else topics that never matched or gave no evidence."""
+    if not summary.held_back:
+        return ("no frame was estimated: the three topics never matched or gave no evidence "
+                "(see 'rejected inputs')")
+    if "focal_range" in summary.held_reason:
+        hint = "-p focal_min:=... / -p focal_max:=... if the camera's focal lies outside"
+    else:
+        hint = "-p max_uncertainty:=0.2 (or higher) to publish less certain estimates"
+    return (f"no CameraInfo published: {summary.held_back} of {summary.frames_read} frames "
+            "were estimated but held back by max_uncertainty / focal_range (the last: "
+            f"{summary.held_reason}); try {hint}")
 
 
 if __name__ == "__main__":  # python -m: as the console script, signals included

@@ -50,7 +50,8 @@ def check_topics(source: BagSource, wanted: dict) -> None:
 
 @dataclass
 class ReplaySummary:
-    """What a replay did: counts, errors against truth (percent), speed, outputs, damage."""
+    """What a replay did: counts, errors against truth (percent), speed, outputs, damage,
+    estimates the publish gate held back."""
 
     frames_read: int = 0
     frames_estimated: int = 0
@@ -61,6 +62,8 @@ class ReplaySummary:
     damaged: str = ""
     rejected: dict = field(default_factory=dict)
     csv_rows: int = 0
+    held_back: int = 0  # frames estimated whose focal the publish gate held back
+    held_reason: str = ""  # the gate's word on the last of them
 
     @property
     def fps(self) -> float:

@@ -3,13 +3,14 @@ one message at a time, into estimates.csv, an output bag and report.png (fcop_re
 
 from __future__ import annotations
 
+import re
 import sys
 import time
 from pathlib import Path
 
 from ..ros.dds import use_large_image_profile
 from ..ros.spin import spin_until as spin
-from .bagio import BagError, BagSource, BagWriter
+from .bagio import BagError, BagSource, BagWriter, error_text
 from .estimates_csv import EstimatesCsv
 from .replay_base import (
     IMAGE_TYPE,
@@ -26,15 +27,42 @@ from .report import write_report
 NODE_NAMESPACE = "/fcop"
 
 
-def _check_encoding(role: str, msg) -> None:
+def _check_encoding(role: str, topic: str, msg) -> None:
     from msg_adapters import DEPTH_ENCODINGS, MASK_ENCODINGS, NOCS_ENCODINGS
 
     supported = {"depth": DEPTH_ENCODINGS, "nocs": NOCS_ENCODINGS, "mask": MASK_ENCODINGS}[role]
     if msg.encoding not in supported:
         raise ReplayError(
-            f"{role} topic: unsupported encoding {msg.encoding!r}; "
+            f"{role} topic {topic!r}: unsupported encoding {msg.encoding!r}; "
             f"supported: {', '.join(supported)}"
         )
+
+
+def _check_encodings(source: BagSource, inputs: dict, decode) -> None:
+    """ReplayError when the first message of an input topic has an encoding the node cannot
+    read: checked before --out is touched. ``decode(raw)`` gives the Image. The bag is read
+    only until each topic with messages has shown one; damage ends the check (the replay then
+    meets it and keeps what came before)."""
+    role_of = {topic: role for role, topic in inputs.items()}
+    left = {t for t in role_of if source.counts.get(t, 0)}
+    it = source.messages(sorted(left))
+    try:
+        while left:
+            try:
+                topic, _, raw = next(it)
+            except StopIteration:
+                return
+            except (ReplayError, BagError):
+                raise
+            except Exception:  # noqa: BLE001 - damage: the replay reports it
+                return
+            if topic in left:
+                left.discard(topic)
+                _check_encoding(role_of[topic], topic, decode(raw))
+    finally:
+        close = getattr(it, "close", None)
+        if close is not None:
+            close()
 
 
 def _node_args(inputs: dict) -> list[str]:
@@ -55,14 +83,56 @@ def _not_the_input(bag, out_dir) -> None:
         )
 
 
+# What a replay writes into <out>/fcop_output: metadata.yaml and its storage's files.
+_BAG_FILE = re.compile(r"\.(mcap|db3)(-journal|-wal|-shm)?$")
+
+
+def _not_an_output_bag(out_bag: Path) -> str:
+    """Why ``out_bag`` is not an output bag a replay wrote ('' when it is, or is absent, or is
+    a symbolic link, whose removal loses nothing): a replay replaces its own, never the user's
+    files (a thesis in o/fcop_output was deleted)."""
+    if out_bag.is_symlink() or not out_bag.exists():
+        return ""
+    if not out_bag.is_dir():
+        return "a file"
+    try:
+        others = sorted(p.name for p in out_bag.iterdir() if not (
+            p.is_file() and (p.name == "metadata.yaml" or _BAG_FILE.search(p.name))))
+    except OSError as exc:
+        return f"unreadable: {exc.strerror or exc}"
+    if others:
+        more = f" and {len(others) - 3} more" if len(others) > 3 else ""
+        return f"it holds {', '.join(others[:3])}{more}"
+    try:  # a bag recorded elsewhere has topics outside the replayed node's namespace
+        import yaml
+
+        meta = yaml.safe_load((out_bag / "metadata.yaml").read_text(encoding="utf-8"))
+        topics = [t["topic_metadata"]["name"] for t in
+                  meta["rosbag2_bagfile_information"]["topics_with_message_count"]]
+    except Exception:  # noqa: BLE001 - no metadata (a run cut short): judged by its files
+        return ""
+    foreign = [t for t in topics if not str(t).startswith(NODE_NAMESPACE + "/")]
+    return f"it records {foreign[0]}" if foreign else ""
+
+
 def _prepare_out(out_dir) -> Path:
-    """Create --out (a directory) and clear a previous output bag; OutputError if impossible."""
+    """Create --out (a directory) after checking that its fcop_output, if any, is a previous
+    output bag; OutputError if impossible."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise OutputError(f"--out {out} exists and is not a directory")
+    out_bag = out / "fcop_output"
+    why = _not_an_output_bag(out_bag)
+    if why:
+        raise OutputError(f"{out_bag} exists and is not an output bag of fcop_replay ({why}): "
+                          "move it away or choose another --out")
     with writing(f"--out {out}"):
         out.mkdir(parents=True, exist_ok=True)
-    out_bag = out / "fcop_output"
+    return out
+
+
+def _clear_output_bag(out_bag: Path) -> None:
+    """Remove the previous output bag (checked by _prepare_out); OutputError if impossible."""
     if out_bag.is_dir() and not out_bag.is_symlink():
         import shutil
 
@@ -71,7 +141,24 @@ def _prepare_out(out_dir) -> Path:
     elif out_bag.exists() or out_bag.is_symlink():
         with writing(f"{out_bag} (removing the previous output bag)"):
             out_bag.unlink()
-    return out
+
+
+def _note_held_back(node, summary: ReplaySummary, seen: list) -> None:
+    """Count the frames the node estimated since the last call whose focal the publish gate
+    held back (max_uncertainty, focal_min..focal_max): a run that published nothing says so
+    instead of blaming its topics. ``seen``: [frames processed at the last call]."""
+    from ..ros.gate import held_back
+    from ..ros.params import gate_settings
+
+    processed = node.counts.processed
+    new, seen[0] = processed - seen[0], processed
+    win = node.window_estimate
+    if new <= 0 or win is None or getattr(win, "focal", None) is None:
+        return
+    why = held_back(win, *gate_settings(node.p))
+    if why:
+        summary.held_back += new
+        summary.held_reason = why
 
 
 def replay(
@@ -87,12 +174,17 @@ def replay(
     out_storage: str = "mcap",
     progress: bool | None = None,
     timeout: float = 60.0,
+    summary: ReplaySummary | None = None,
 ) -> ReplaySummary:
     """Offline replay (see the module docstring). Raises ReplayError/BagError for unusable input
-    or parameters (before anything runs), OutputError when an output cannot be written (its
+    or parameters (before --out is touched), OutputError when an output cannot be written (its
     message says what was lost); a bag damaged part-way is reported in the summary and its
-    outputs keep what came before."""
+    outputs keep what came before. ``summary``: filled as the run goes (its ``out_dir`` set once
+    --out is written), so a caller that sees Ctrl-C knows what was written."""
+    summary = summary if summary is not None else ReplaySummary()
     params = node_parameters(params_file, overrides)
+    if not str(out_dir):
+        raise ReplayError("--out is empty: give the output directory ('.' for this one)")
     use_large_image_profile()
     import rclpy
     from rclpy.context import Context
@@ -113,23 +205,30 @@ def replay(
     wanted = {role: (t, IMAGE_TYPE) for role, t in inputs.items()}
     if truth_topic is not None:
         wanted["truth"] = (truth_topic, INFO_TYPE)
-    summary = ReplaySummary()
     try:
         check_topics(source, wanted)
         total = source.counts.get(depth_topic, 0)
         if total == 0:
             raise ReplayError(f"depth topic {depth_topic!r} has no messages")
+        _check_encodings(source, inputs, lambda raw: deserialize_message(raw, Image))
         _not_the_input(bag, out_dir)
+        # Only now is --out touched: the CSV first, so an unwritable one keeps the previous
+        # output bag.
         out = _prepare_out(out_dir)
-        summary.out_dir = str(out)
+        out_bag = out / "fcop_output"
         table = EstimatesCsv(out / "estimates.csv", truth_topic is not None, summary)
+        summary.out_dir = str(out)
+        try:
+            _clear_output_bag(out_bag)
+        except BaseException:
+            table.close(final=False)
+            raise
     except BaseException:
         source.close()
         raise
-    out_bag = out / "fcop_output"
     role_of = {v: k for k, v in inputs.items()}
     rows: list[dict] = []
-    checked = set()
+    processed = [0]
     state = {
         "node": None,
         "feeder": None,
@@ -260,9 +359,6 @@ def replay(
                     table.truth(stamp_ns(info), float(info.k[0]))
                     continue
                 role = role_of[topic]
-                if role not in checked:
-                    _check_encoding(role, deserialize_message(raw, Image))
-                    checked.add(role)
                 pubs[topic].publish(raw)
                 sent += 1
                 spin_until(lambda: node.counts.received >= sent)
@@ -271,11 +367,13 @@ def replay(
                     if state["bar"] is not None:
                         state["bar"].update(1)
                 drain()
+                _note_held_back(node, summary, processed)
         except (ReplayError, BagError):
             raise
         except Exception as exc:  # a damaged or truncated bag: keep what came before
-            source.damaged = f"{type(exc).__name__}: {exc}"
+            source.damaged = f"unreadable after {sent} image messages ({error_text(exc)})"
         drain()
+        _note_held_back(node, summary, processed)
         summary.damaged = source.damaged
 
     def finish(ok: bool) -> list[OutputError]:

@@ -29,9 +29,13 @@ def load_params_file(path, node_name: str = NODE_NAME) -> dict:
     """{name: value} of every section of a ROS 2 parameter file that applies to ``node_name``
     (see :func:`_applies`), in the order rcl applies them: file order, a later value winning."""
     try:
-        text = Path(path).read_text()
+        text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
         raise ReplayError(f"cannot read --params-file {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:  # a binary file, or another encoding: rcl reads UTF-8
+        byte = exc.object[exc.start]
+        raise ReplayError(f"--params-file {path} is not UTF-8 text (byte 0x{byte:02x} at offset "
+                          f"{exc.start}); a ROS 2 parameter file is UTF-8 YAML") from None
     try:
         entries = rcl_yaml.parameter_entries(text)
     except yaml.YAMLError as exc:

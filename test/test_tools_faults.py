@@ -1,0 +1,250 @@
+"""Faults a reviewer found in the command-line tools, each as a user met it: a replay that
+deleted <out>/fcop_output (a user's files too) before checking its input, tracebacks for a
+non-UTF-8 params file, a negative seed or a huge image, a misleading 'nothing estimated', a
+damaged bag said only on stdout, Ctrl-C messages about outputs never written, and messages
+without the option or topic they were about."""
+import csv
+
+import numpy as np
+import pytest
+from sensor_msgs.msg import Image
+
+from fcop_ros.synthetic import SequenceSpec
+from fcop_ros.tools import demo
+from fcop_ros.tools import make_bag as mb
+from fcop_ros.tools import nocs_eval as ne
+from fcop_ros.tools import replay as rp
+from fcop_ros.tools import replay_offline
+from fcop_ros.tools.bagio import BagWriter
+from msg_adapters import depth_to_image, header_from_ns
+
+START = 1_700_000_000_000_000_000
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory):
+    path = tmp_path_factory.mktemp("bags") / "in"
+    mb.make_bag(path, SequenceSpec(5, 160, 120, 150.0, None, None, "mild", 4), seed=3)
+    return path
+
+
+def topics(*extra):
+    return ["--depth-topic", mb.TOPICS["depth"], "--nocs-topic", mb.TOPICS["nocs"],
+            "--mask-topic", mb.TOPICS["mask"], *extra]
+
+
+def one_line(err: str, prog: str = "fcop_replay") -> str:
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"{prog}: ") and "Traceback" not in err
+    return lines[0]
+
+
+def previous_output(out):
+    """An output bag as a previous replay left it (what a replay may replace)."""
+    bag = out / "fcop_output"
+    bag.mkdir(parents=True)
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (bag / "fcop_output.mcap").write_bytes(b"")
+    return bag
+
+
+def bad_encoding_bag(path):
+    h = header_from_ns(START)
+    img = depth_to_image(np.ones((8, 8)), "32FC1", h)
+    bad = Image(header=h, height=8, width=8, encoding="mono8", step=8, data=bytes(64))
+    with BagWriter(path, "mcap") as w:
+        for topic, msg in (("/d", bad), ("/n", img), ("/m", img)):
+            w.write(topic, msg, START)
+    return path
+
+
+# 1. --out is touched only once the input is checked; a fcop_output not ours is refused.
+
+def test_bad_encoding_leaves_the_previous_output_bag(tmp_path, capsys):
+    bag = bad_encoding_bag(tmp_path / "bad")
+    out = tmp_path / "o"
+    prev = previous_output(out)
+    code = rp.main([str(bag), "--depth-topic", "/d", "--nocs-topic", "/n", "--mask-topic", "/m",
+                    "--out", str(out)])
+    assert code == 2
+    line = one_line(capsys.readouterr().err)
+    # 8. the message names the topic
+    assert "depth topic '/d': unsupported encoding 'mono8'" in line
+    assert sorted(p.name for p in prev.iterdir()) == ["fcop_output.mcap", "metadata.yaml"]
+
+
+def test_unwritable_estimates_csv_leaves_the_previous_output_bag(bag, tmp_path, capsys):
+    out = tmp_path / "o"
+    prev = previous_output(out)
+    (out / "estimates.csv").mkdir()
+    assert rp.main([str(bag), *topics("--out", str(out))]) == 4
+    assert f"{out}/estimates.csv" in one_line(capsys.readouterr().err)
+    assert (prev / "metadata.yaml").exists()
+
+
+def test_a_fcop_output_the_replay_did_not_write_is_refused_not_deleted(bag, tmp_path, capsys):
+    out = tmp_path / "o"
+    (out / "fcop_output").mkdir(parents=True)
+    (out / "fcop_output" / "thesis.tex").write_text("x")
+    assert rp.main([str(bag), *topics("--out", str(out))]) == 4
+    line = one_line(capsys.readouterr().err)
+    assert f"{out}/fcop_output" in line and "not an output bag of fcop_replay" in line
+    assert (out / "fcop_output" / "thesis.tex").read_text() == "x"
+    assert not (out / "estimates.csv").exists()
+    # A file of that name is not one either.
+    (out / "fcop_output" / "thesis.tex").unlink()
+    (out / "fcop_output").rmdir()
+    (out / "fcop_output").write_text("notes")
+    assert rp.main([str(bag), *topics("--out", str(out))]) == 4
+    assert "not an output bag of fcop_replay" in one_line(capsys.readouterr().err)
+    assert (out / "fcop_output").read_text() == "notes"
+
+
+def test_a_bag_recorded_elsewhere_in_fcop_output_is_not_taken_for_an_output(bag, tmp_path):
+    """Only metadata.yaml and storage files, but the topics of a recording: the user's bag."""
+    recorded = tmp_path / "fcop_output"
+    import shutil
+    shutil.copytree(bag, recorded)
+    assert "it records /camera/" in replay_offline._not_an_output_bag(recorded)
+    assert replay_offline._not_an_output_bag(tmp_path / "absent") == ""
+
+
+def test_a_previous_output_is_replaced(bag, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert rp.main([str(bag), *topics("--out", str(out))]) == 0
+    assert rp.main([str(bag), *topics("--out", str(out))]) == 0
+    capsys.readouterr()
+    assert (out / "fcop_output" / "metadata.yaml").exists()
+
+
+def test_empty_out_is_refused(bag, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert rp.main([str(bag), *topics("--out", "")]) == 2
+    assert "--out" in one_line(capsys.readouterr().err)
+    assert not (tmp_path / "estimates.csv").exists()
+
+
+# 2. A params file that is not UTF-8.
+
+def test_params_file_not_utf8_is_one_line_exit_2(bag, tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_bytes(b"\xff\xfe\x00bin")
+    assert rp.main([str(bag), *topics("--out", str(tmp_path / "o"), "--params-file",
+                                      str(bad))]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert f"--params-file {bad}" in line and "UTF-8" in line
+    assert not (tmp_path / "o").exists()
+
+
+# 3. Seeds and sizes fcop_make_bag and fcop_demo cannot use.
+
+@pytest.mark.parametrize("args, said", [
+    (["--width", "8193", "--height", "8", "--frames", "1"], "at most 8192"),
+    (["--width", "100000", "--height", "100000"], "at most 8192"),
+    (["--seed", "-1"], "--seed must be an integer in [0, 2147483647]"),
+])
+def test_make_bag_refuses_a_bad_seed_or_size_before_writing(tmp_path, capsys, args, said):
+    assert mb.main([str(tmp_path / "m")] + args) == 2
+    assert said in one_line(capsys.readouterr().err, "fcop_make_bag")
+    assert not (tmp_path / "m").exists()
+
+
+def test_demo_refuses_a_negative_seed_before_writing(tmp_path, capsys):
+    assert demo.main(["--out", str(tmp_path / "d"), "--seed", "-1"]) == 2
+    assert "--seed must be" in one_line(capsys.readouterr().err, "fcop_demo")
+    assert not (tmp_path / "d").exists()
+
+
+def test_seed_range_is_in_the_help():
+    for parser in (mb.build_parser(), demo.build_parser()):
+        assert "0..2147483647" in " ".join(parser.format_help().split())
+
+
+# 4. Every estimate held back by the publish gate.
+
+def test_estimates_held_back_are_said_with_the_hint(bag, tmp_path, capsys):
+    code = rp.main([str(bag), *topics("--out", str(tmp_path / "o"), "-p",
+                                      "max_uncertainty:=0.000001")])
+    assert code == 1
+    err = capsys.readouterr().err
+    line = next(ln for ln in err.splitlines() if ln.startswith("fcop_replay: "))
+    assert "never matched" not in line
+    assert "held back by max_uncertainty" in line and "-p max_uncertainty:=" in line
+    assert "5 of 5" in line
+
+
+# 5. A damaged bag: one line on stderr, saying where.
+
+def test_damaged_bag_is_said_on_stderr_with_where(tmp_path, capsys):
+    cut = tmp_path / "cut"
+    mb.make_bag(cut, SequenceSpec(12, 160, 120, 150.0, None, None, "mild", 4), seed=3)
+    f = next(cut.glob("*.mcap"))
+    data = f.read_bytes()
+    f.write_bytes(data[: len(data) // 2])
+    assert rp.main([str(cut), *topics("--out", str(tmp_path / "o"))]) == 3
+    captured = capsys.readouterr()
+    assert "bag damaged" in captured.out
+    line = one_line(captured.err)
+    assert "bag damaged" in line and "(EndOfFile: )" not in line and ": )" not in line
+    assert "byte" in line or "message" in line
+
+
+# 6. Ctrl-C says only what is true.
+
+def test_replay_interrupted_before_out_says_nothing_was_written(bag, tmp_path, capsys,
+                                                                  monkeypatch):
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(replay_offline, "node_parameters", interrupted)
+    assert rp.main([str(bag), *topics("--out", str(tmp_path / "o"))]) == 130
+    line = one_line(capsys.readouterr().err)
+    assert "outputs hold" not in line and "nothing written" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_eval_nocs_interrupted_before_the_csv_says_so(tmp_path, capsys, monkeypatch):
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ne, "find_frames", interrupted)
+    out = tmp_path / "e.csv"
+    assert ne.main([str(tmp_path), "--intrinsics", "real275", "--csv", str(out)]) == 130
+    line = one_line(capsys.readouterr().err, "fcop_eval_nocs")
+    assert "holds the frames before" not in line and "not written" in line
+    assert not out.exists()
+
+
+# 7. fcop_demo's exit codes.
+
+def test_demo_help_lists_every_exit_code():
+    text = demo.build_parser().format_help()
+    for code in (0, 1, 2, 130):
+        assert f"\n  {code:<4}" in text, code
+
+
+# 8. Messages with their context.
+
+def test_eval_nocs_unwritable_csv_names_the_option(tmp_path, capsys):
+    root = tmp_path / "data"
+    rng = np.random.default_rng(0)
+    ne.write_frame(root / "s" / "0000", rng.uniform(0.5, 1, (16, 16)),
+                   rng.uniform(0, 1, (16, 16, 3)), np.ones((16, 16), int), {1: 1})
+    assert ne.main([str(root), "--intrinsics", "real275", "--csv", "/nonexist/x.csv"]) == 2
+    line = one_line(capsys.readouterr().err, "fcop_eval_nocs")
+    assert "--csv /nonexist/x.csv" in line and "No such file or directory" in line
+
+
+def test_eval_nocs_missing_image_gives_no_opencv_warning(tmp_path, capfd):
+    root = tmp_path / "data"
+    rng = np.random.default_rng(0)
+    ne.write_frame(root / "s" / "0000", rng.uniform(0.5, 1, (16, 16)),
+                   rng.uniform(0, 1, (16, 16, 3)), np.ones((16, 16), int), {1: 1})
+    (root / "s" / "0000_depth.png").unlink()
+    out = tmp_path / "e.csv"
+    assert ne.main([str(root), "--intrinsics", "real275", "--csv", str(out)]) == 0
+    err = capfd.readouterr().err
+    assert "WARN" not in err and "imread" not in err, err
+    rows = list(csv.DictReader(open(out)))
+    assert "0000_depth.png" in rows[0]["reason"]
