@@ -107,6 +107,30 @@ def test_ransac_variant_is_selectable():
     assert est.method == "ransac" and abs(est.focal / fr.focal - 1) < 0.01 and est.objects
 
 
+def test_ransac_without_a_supporting_pixel_gives_no_focal():
+    """A threshold no pixel meets: no focal, and the reason says why (it gave 637 px with 0
+    inliers)."""
+    fr = noisy_frame(0, "mild")
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0,
+                         options=EstimatorOptions(method="ransac", ransac_threshold=1e-12))
+    assert est.focal is None and "no RANSAC hypothesis has a pixel within" in est.reason
+
+
+def test_options_that_would_break_an_estimate_are_refused_where_they_are_set():
+    """An infinite noise bound crashed estimate_focal; an infinite object_tau (or any error
+    term) made every std_rel infinite; a focal given as a string or a bool was taken."""
+    with pytest.raises(ValueError, match="noise bound must be finite"):
+        NoiseBound(np.inf, "absolute")
+    for name in ("object_tau", "shape_error", "unseen_depth_error", "object_tau_weight"):
+        with pytest.raises(ValueError, match=f"{name} must be finite"):
+            EstimatorOptions(**{name: np.inf})
+    fr = clean_frame(0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0, poses=False)
+    for bad in ("600", True):
+        with pytest.raises(TypeError, match="focal must be a number of pixels"):
+            estimate_poses(est.instances, bad)
+
+
 def test_literal_paper_method_on_clean_frame():
     """Absolute 5 px bound, no refinement, no denoising: the paper's fCOP-IS."""
     fr = clean_frame(0)

@@ -375,7 +375,7 @@ def test_estimates_without_std_rel_are_named_as_why_there_is_no_focal():
     w = FocalWindow()
     for k in range(12):
         r = w.add(estimate(600.0, std_rel=None), k / 30)
-    assert r.focal is None and "12 of its frames have a focal but no std_rel" in r.reason
+    assert r.focal is None and "12 of its frames have a focal but no usable std_rel" in r.reason
     w = FocalWindow(WindowOptions(max_frames=5))
     for k in range(12):
         w.add(estimate(600.0, std_rel=None) if k < 6 else empty_estimate(), k / 30)
@@ -458,3 +458,16 @@ def test_vectorised_medians_give_the_bits_of_the_loops_they_replace():
         y = np.round(rng.normal(size=n), 1)
         cut = np.arange(k, n - k + 1)
         np.testing.assert_array_equal(_differences(y, cut), [_difference(y, c) for c in cut])
+
+
+def test_a_frame_that_is_no_evidence_does_not_break_the_window():
+    """A focal of NaN, 0 or below is refused where it is added (it broke every later update,
+    a division by zero); a std_rel of 0, inf or 1e200 (object_tau=inf gave inf) is a frame
+    without evidence; the good frames around them still make the estimate."""
+    w = FocalWindow()
+    for bad in (float("nan"), 0.0, -5.0):
+        with pytest.raises(ValueError, match="focal must be finite and > 0"):
+            w.add(estimate(bad, 0.01), 0.0)
+    for k, s in enumerate((0.01, 0.0, np.inf, 1e200, 0.01, 0.01)):
+        r = w.add(estimate(600.0 + k, s, std_rel_noise=s), float(k))
+    assert r.used == 3 and abs(r.focal - 603.0) < 3.0 and np.isfinite(r.std_rel)

@@ -12,6 +12,8 @@ the combined focal length. ``method="ransac"`` replaces stabbing by the paper's 
 
 from __future__ import annotations
 
+import numbers
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -380,10 +382,9 @@ def estimate_poses(
     fixed focal length, all instances fitted in one batch; instances whose NOCS fit only as a
     reflection get none. ``rng`` draws the fit's pixel subsets (default: a fixed seed).
     """
-    try:
-        focal = float(focal)
-    except (TypeError, ValueError):
-        raise TypeError(f"focal must be a number of pixels, got {focal!r}") from None
+    if isinstance(focal, (bool, np.bool_)) or not isinstance(focal, numbers.Real):
+        raise TypeError(f"focal must be a number of pixels, got {focal!r}")
+    focal = float(focal)
     if not (np.isfinite(focal) and focal > 0):
         raise ValueError(f"focal must be a finite number of pixels > 0, got {focal}")
     if not instances:
@@ -532,6 +533,10 @@ def estimate_focal(
         f, support, _ = _ransac(instances, opt, rng)
         if f is None:
             return FocalEstimate(None, reason="no valid RANSAC hypothesis", **base)
+        if support == 0:
+            return FocalEstimate(None, reason=(
+                "no RANSAC hypothesis has a pixel within ransac_threshold "
+                f"({opt.ransac_threshold:g} of the object's depth) of its object"), **base)
         return _finish(
             FocalEstimate(None, inlier_count=support, focal_votes=f, **base),
             f,

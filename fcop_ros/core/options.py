@@ -31,9 +31,10 @@ class NoiseBound:
         if self.mode not in BOUND_MODES:
             raise ValueError(f"noise bound mode must be one of {BOUND_MODES}, got {self.mode!r}")
         too_wide = self.mode == "relative" and not self.value <= MAX_RELATIVE_BOUND
-        if not self.value > 0 or too_wide:
+        if not (self.value > 0 and np.isfinite(self.value)) or too_wide:
             raise ValueError(
-                f"noise bound must be > 0 (a fraction <= {MAX_RELATIVE_BOUND} when relative), "
+                f"noise bound must be finite and > 0 (a fraction <= {MAX_RELATIVE_BOUND} when "
+                "relative), "
                 f"got {self.value}"
             )
 
@@ -130,6 +131,10 @@ class EstimatorOptions:
             _check_integer(self, name, low)
         for name, (low, high) in _EST_NUMBERS.items():
             _check_number(self, name, low, high)
+        for name in _EST_FINITE:
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be finite (it enters every estimate's variance), "
+                                 f"got {getattr(self, name)!r}")
         for name in ("refine", "depth_tilt"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
@@ -150,6 +155,8 @@ _EST_NUMBERS = {
     "object_tau_weight": (0.0, np.inf), "pose_max_std": (0.0, np.inf),
     "ransac_threshold": (1e-12, np.inf),
 }
+# ... of which these must also be finite.
+_EST_FINITE = ("unseen_depth_error", "shape_error", "object_tau", "object_tau_weight")
 
 
 def _check_integer(options, name: str, low: int) -> None:

@@ -154,12 +154,18 @@ class FocalWindow:
         new_size = (
             bool(self._frames) and size is not None and self._frames[-1].size not in (None, size)
         )
+        if estimate.focal is not None and not (np.isfinite(estimate.focal) and estimate.focal > 0):
+            raise ValueError(f"the estimate's focal must be finite and > 0, or None; got "
+                             f"{estimate.focal!r}")
         if new_size and estimate.focal is None:
             return replace(self.current, changed=False)
         if new_size:
             self._frames.clear()
-        ok = estimate.focal is not None and estimate.std_rel is not None and estimate.std_rel > 0
-        var = float(estimate.std_rel) ** 2 if ok else np.inf
+        with np.errstate(over="ignore", invalid="ignore"):
+            var = np.float64(estimate.std_rel or 0.0) ** 2
+        # A frame whose std_rel is 0, infinite or NaN weighs nothing: it is kept without evidence.
+        ok = estimate.focal is not None and bool(np.isfinite(var) and var > 0)
+        var = float(var) if ok else np.inf
         noise = estimate.std_rel_noise
         noise = min(float(noise) ** 2, var) if ok and noise is not None and noise > 0 else var
         prior = estimate.std_rel_prior
@@ -287,8 +293,9 @@ class FocalWindow:
                    f"{self.options.min_frames})")
             unweighed = sum(f.unweighed for f in self._frames)
             if unweighed:
-                why += (f"; {unweighed} of its frames have a focal but no std_rel "
-                        "(method='ransac' or refine=False), which the window weighs frames by")
+                why += (f"; {unweighed} of its frames have a focal but no usable std_rel (none, "
+                        "as method='ransac' and refine=False give, 0 or not finite), which the "
+                        "window weighs frames by")
             return WindowEstimate(None, frames=n_all, support=support, reason=why)
         if support < self.options.min_window_votes:
             return WindowEstimate(
