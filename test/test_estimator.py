@@ -129,6 +129,9 @@ def test_options_that_would_break_an_estimate_are_refused_where_they_are_set():
     for bad in ("600", True):
         with pytest.raises(TypeError, match="focal must be a number of pixels"):
             estimate_poses(est.instances, bad)
+    assert len(estimate_poses(est.instances, est.focal, exclude=None)) == len(est.instances)
+    with pytest.raises(ValueError, match=r"focal_range must be \(min, max\)"):
+        EstimatorOptions(focal_range=(50, 100, 2000))
 
 
 def test_literal_paper_method_on_clean_frame():

@@ -390,7 +390,7 @@ def estimate_poses(
     if not instances:
         return []
     fits = fit_objects(instances, focal, fix_focal=True, proper=True, iterations=6, rng=rng)
-    skip = set(exclude)
+    skip = set(exclude or ())
     return [
         ObjectPose(
             inst.instance_id,

@@ -120,7 +120,11 @@ class EstimatorOptions:
     ransac_threshold: float = 0.005
 
     def __post_init__(self):
-        lo, hi = self.focal_range
+        try:
+            lo, hi = self.focal_range
+        except (TypeError, ValueError):
+            raise ValueError(f"focal_range must be (min, max) in pixels, got {self.focal_range!r}"
+                             ) from None
         if not 0 < lo < hi:
             raise ValueError(f"focal_range must satisfy 0 < min < max, got {self.focal_range}")
         if self.method not in METHODS:
