@@ -15,6 +15,7 @@ from fcop_ros.tools import make_bag as mb
 from fcop_ros.tools import nocs_eval as ne
 from fcop_ros.tools import replay as rp
 from fcop_ros.tools import replay_offline
+from fcop_ros.tools.bagio import not_a_bag_of
 from fcop_ros.tools.bagio import BagWriter
 from msg_adapters import depth_to_image, header_from_ns
 
@@ -106,8 +107,8 @@ def test_a_bag_recorded_elsewhere_in_fcop_output_is_not_taken_for_an_output(bag,
     recorded = tmp_path / "fcop_output"
     import shutil
     shutil.copytree(bag, recorded)
-    assert "it records /camera/" in replay_offline._not_an_output_bag(recorded)
-    assert replay_offline._not_an_output_bag(tmp_path / "absent") == ""
+    assert "it records /camera/" in not_a_bag_of(recorded, "/fcop/")
+    assert not_a_bag_of(tmp_path / "absent", "/fcop/") == ""
 
 
 def test_a_previous_output_is_replaced(bag, tmp_path, capsys):
@@ -248,3 +249,14 @@ def test_eval_nocs_missing_image_gives_no_opencv_warning(tmp_path, capfd):
     assert "WARN" not in err and "imread" not in err, err
     rows = list(csv.DictReader(open(out)))
     assert "0000_depth.png" in rows[0]["reason"]
+
+
+def test_demo_refuses_an_input_bag_it_did_not_write(tmp_path, capsys):
+    """fcop_demo replaced <out>/input_bag whatever it held (the reviewer's second data loss)."""
+    mine = tmp_path / "input_bag"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep me")
+    assert demo.main(["--out", str(tmp_path), "--frames", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "is not a bag fcop_demo wrote (it holds notes.txt)" in err and err.count("\n") == 1
+    assert (mine / "notes.txt").read_text() == "keep me"

@@ -8,6 +8,8 @@ zstd-compressed the way rosbag2 does it: MCAP chunks (storage compression, what 
 """
 from __future__ import annotations
 
+import re
+
 import sqlite3
 from pathlib import Path
 
@@ -230,3 +232,35 @@ class BagSource:
     def close(self) -> None:
         if self._reader is not None:
             self._reader.close()
+
+
+# What a bag directory holds: metadata.yaml and its storage's files.
+_BAG_FILE = re.compile(r"\.(mcap|db3)(-journal|-wal|-shm)?$")
+
+
+def not_a_bag_of(out_bag: Path, prefix: str) -> str:
+    """Why ``out_bag`` is not a bag a tool of ours wrote, whose topics all start with ``prefix``
+    ('' when it is, or is absent, or is a symbolic link, whose removal loses nothing): a tool
+    replaces its own outputs, never the user's files (a thesis in o/fcop_output was deleted)."""
+    if out_bag.is_symlink() or not out_bag.exists():
+        return ""
+    if not out_bag.is_dir():
+        return "a file"
+    try:
+        others = sorted(p.name for p in out_bag.iterdir() if not (
+            p.is_file() and (p.name == "metadata.yaml" or _BAG_FILE.search(p.name))))
+    except OSError as exc:
+        return f"unreadable: {exc.strerror or exc}"
+    if others:
+        more = f" and {len(others) - 3} more" if len(others) > 3 else ""
+        return f"it holds {', '.join(others[:3])}{more}"
+    try:  # a bag recorded elsewhere has topics outside the tool's
+        import yaml
+
+        meta = yaml.safe_load((out_bag / "metadata.yaml").read_text(encoding="utf-8"))
+        topics = [t["topic_metadata"]["name"] for t in
+                  meta["rosbag2_bagfile_information"]["topics_with_message_count"]]
+    except Exception:  # noqa: BLE001 - no metadata (a run cut short): judged by its files
+        return ""
+    foreign = [t for t in topics if not str(t).startswith(prefix)]
+    return f"it records {foreign[0]}" if foreign else ""

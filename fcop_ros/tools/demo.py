@@ -35,7 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    from .bagio import BagError
+    from .bagio import BagError, not_a_bag_of
     from .replay_base import ReplayError
 
     args = build_parser().parse_args(argv)
@@ -48,8 +48,14 @@ def main(argv=None) -> int:
         check_seed_and_size(args.seed, 640, 480)
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out} exists and is not a directory")
-        if bag.exists():
+        why = not_a_bag_of(bag, "/camera/")
+        if why:
+            raise ValueError(f"{bag} exists and is not a bag fcop_demo wrote ({why}): move it "
+                             "away or choose another --out")
+        if bag.is_dir() and not bag.is_symlink():
             shutil.rmtree(bag)
+        elif bag.exists() or bag.is_symlink():
+            bag.unlink()
         out.mkdir(parents=True, exist_ok=True)
     except (ValueError, OSError) as exc:
         print(f"fcop_demo: {exc}", file=sys.stderr)

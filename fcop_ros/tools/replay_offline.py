@@ -3,14 +3,13 @@ one message at a time, into estimates.csv, an output bag and report.png (fcop_re
 
 from __future__ import annotations
 
-import re
 import sys
 import time
 from pathlib import Path
 
 from ..ros.dds import use_large_image_profile
 from ..ros.spin import spin_until as spin
-from .bagio import BagError, BagSource, BagWriter, error_text
+from .bagio import BagError, BagSource, BagWriter, error_text, not_a_bag_of
 from .estimates_csv import EstimatesCsv
 from .replay_base import (
     IMAGE_TYPE,
@@ -83,38 +82,6 @@ def _not_the_input(bag, out_dir) -> None:
         )
 
 
-# What a replay writes into <out>/fcop_output: metadata.yaml and its storage's files.
-_BAG_FILE = re.compile(r"\.(mcap|db3)(-journal|-wal|-shm)?$")
-
-
-def _not_an_output_bag(out_bag: Path) -> str:
-    """Why ``out_bag`` is not an output bag a replay wrote ('' when it is, or is absent, or is
-    a symbolic link, whose removal loses nothing): a replay replaces its own, never the user's
-    files (a thesis in o/fcop_output was deleted)."""
-    if out_bag.is_symlink() or not out_bag.exists():
-        return ""
-    if not out_bag.is_dir():
-        return "a file"
-    try:
-        others = sorted(p.name for p in out_bag.iterdir() if not (
-            p.is_file() and (p.name == "metadata.yaml" or _BAG_FILE.search(p.name))))
-    except OSError as exc:
-        return f"unreadable: {exc.strerror or exc}"
-    if others:
-        more = f" and {len(others) - 3} more" if len(others) > 3 else ""
-        return f"it holds {', '.join(others[:3])}{more}"
-    try:  # a bag recorded elsewhere has topics outside the replayed node's namespace
-        import yaml
-
-        meta = yaml.safe_load((out_bag / "metadata.yaml").read_text(encoding="utf-8"))
-        topics = [t["topic_metadata"]["name"] for t in
-                  meta["rosbag2_bagfile_information"]["topics_with_message_count"]]
-    except Exception:  # noqa: BLE001 - no metadata (a run cut short): judged by its files
-        return ""
-    foreign = [t for t in topics if not str(t).startswith(NODE_NAMESPACE + "/")]
-    return f"it records {foreign[0]}" if foreign else ""
-
-
 def _prepare_out(out_dir) -> Path:
     """Create --out (a directory) after checking that its fcop_output, if any, is a previous
     output bag; OutputError if impossible."""
@@ -122,7 +89,7 @@ def _prepare_out(out_dir) -> Path:
     if out.exists() and not out.is_dir():
         raise OutputError(f"--out {out} exists and is not a directory")
     out_bag = out / "fcop_output"
-    why = _not_an_output_bag(out_bag)
+    why = not_a_bag_of(out_bag, NODE_NAMESPACE + "/")
     if why:
         raise OutputError(f"{out_bag} exists and is not an output bag of fcop_replay ({why}): "
                           "move it away or choose another --out")
