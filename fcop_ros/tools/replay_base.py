@@ -10,10 +10,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sensor_msgs.msg import CameraInfo, Image
+
+from ..ros.topics import type_name
 from .bagio import BagSource
 
-IMAGE_TYPE = "sensor_msgs/msg/Image"
-INFO_TYPE = "sensor_msgs/msg/CameraInfo"
+IMAGE_TYPE = type_name(Image)
+INFO_TYPE = type_name(CameraInfo)
 
 
 class ReplayError(RuntimeError):
