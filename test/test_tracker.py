@@ -131,3 +131,23 @@ def test_frame_outcome_says_a_zoom_each_time_the_window_restarts():
         lines += [e for e in frame_outcome(est, t.add(est, k)).log if e[1] == "zoom"]
     assert len(lines) == 1 and lines[0][0] == "event", lines
     assert lines[0][2].startswith("fcop_node: focal length changed (zoom?): window restarted")
+
+
+def test_frame_outcome_says_when_the_window_keeps_its_frames_through_a_zoom():
+    """Objects whose image radii and extents grow by the focal lengths' 25%: the node says the
+    zoom it measured and that the window kept its frames, and the window holds all 20."""
+    from fcop_ros.ros.frame_outcome import frame_outcome
+
+    t = tracker(frames=30)
+    lines = []
+    for k in range(20):
+        zoom = 1.25 if k >= 10 else 1.0
+        est = estimate(600.0 * zoom)
+        est.object_radii = {1: 40.0 * zoom * (1 + 0.002 * (k % 3)), 2: 25.0 * zoom}
+        est.object_extents = {i: r * 1.5 for i, r in est.object_radii.items()}
+        lines += [e for e in frame_outcome(est, t.add(est, k)).log if e[1] == "zoom"]
+    assert len(lines) == 1, lines
+    assert lines[0][2] == ("fcop_node: focal length changed (zoom?): x1.251 as the objects' "
+                           "image sizes show; the window keeps its 12 frames at the new focal, "
+                           "now at 750.3 px")
+    assert len(t.window) == 20 and abs(t.current.focal / 750.0 - 1) < 1e-3

@@ -88,13 +88,16 @@ def test_window_averages_on_moving_camera():
 def test_zoom_on_the_world_short_of_the_aim():
     """Eight zoom sequences of the predicted preset (seeds 7600-7603, x1.25 and x0.8 at frame 20
     of 40, window of 30): frames until the window is within 5% of the new focal length for
-    good, counted from the zoom (20: never). Measured 20, 20, 1, 1, 1, 1, 20, 11 and seven
-    changes detected (six at frame 21, one at 31): the objects' extents show the zoom at its
-    second frame. With the frames' focal lengths alone (f350ff8): 20, 20, 20, 11, 1, 1, 20, 15
-    and three; when their whole std_rel floored a step (until 1be3974): 20, 20, 20, 11, 20, 10,
-    20, 15 and two. Short of the issue's aim (15 frames): in three sequences the new focal's
-    frames themselves err by 9-17% (median), which no restart mends."""
-    delays, changes = [], 0
+    good, counted from the zoom (20: never). Measured 20, 20, 1, 1, 1, 1, 20, 1 and seven
+    changes detected (six at frame 21, one at 30): the objects' extents show the zoom at its
+    second frame, and at six of the seven the window keeps its older frames at the zoom the
+    radii measure (0.765-0.800 for 0.8, 1.249-1.269 for 1.25). Restarting instead (until this
+    round): 20, 20, 1, 1, 1, 1, 20, 11. With the frames' focal lengths alone (f350ff8): 20, 20,
+    20, 11, 1, 1, 20, 15 and three changes; when their whole std_rel floored a step (until
+    1be3974): 20, 20, 20, 11, 20, 10, 20, 15 and two. Short of the issue's aim (15 frames): in
+    three sequences the new focal's frames themselves err by 9-17% (median), which neither a
+    restart nor the older frames mend."""
+    delays, changes, carried = [], 0, 0
     for seed in range(FIRST_SEED + 600, FIRST_SEED + 604):
         for zoom in (1.25, 0.8):
             seq = world_frames("predicted", seed, 40, zoom_frame=20, zoom_factor=zoom)
@@ -104,11 +107,12 @@ def test_zoom_on_the_world_short_of_the_aim():
                 est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False)
                 r = w.add(est, k / 30)
                 changes += r.changed
+                carried += r.zoom is not None
                 if k >= 20 and (r.focal is None or abs(np.log(r.focal / fr.focal)) > 0.05):
                     bad.append(k - 20)
             delays.append(bad[-1] + 1 if bad else 0)
-    assert sum(d <= 15 for d in delays) >= 5
-    assert changes >= 6
+    assert sum(d <= 15 for d in delays) >= 5 and max(d for d in delays if d < 20) == 1
+    assert changes >= 6 and carried >= 5
 
 
 def _garbage(fr, kind, rng):

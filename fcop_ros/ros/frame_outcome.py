@@ -49,8 +49,11 @@ def frame_outcome(est, step) -> FrameOutcome:
         ow, oh = step.resized_from
         log.append(("event", "resized", f"fcop_node: image size changed from {ow}x{oh} to "
                                         f"{w}x{h}: new focal window"))
-    if step.window.changed:
-        at = "no focal yet" if step.window.focal is None else f"{step.window.focal:.1f} px"
-        log.append(("event", "zoom", "fcop_node: focal length changed (zoom?): window "
-                                     f"restarted, now at {at}"))
+    win = step.window
+    if win.changed:
+        at = "no focal yet" if win.focal is None else f"{win.focal:.1f} px"
+        log.append(("event", "zoom", "fcop_node: focal length changed (zoom?): " + (
+            "window restarted" if win.zoom is None else
+            f"x{win.zoom:.3f} as the objects' image sizes show; the window keeps its "
+            f"{win.frames} frames at the new focal") + f", now at {at}"))
     return FrameOutcome(dropped, warnings, tuple(log), True)
