@@ -280,6 +280,23 @@ def test_a_zoom_while_the_camera_moves_is_seen_by_the_scale_that_moves_with_it()
     assert _zoom_restarts(10, 40, backing(1.22)) == [(21, 2)]
 
 
+def _zoom_run(seed, zoom, n, before, after, jitter=0.01, with_radii=True):
+    """A window over n frames with a zoom at frame 20: frames before and after it err by
+    (bias, std_rel, std_rel_noise, scatter) and show _scene's objects (sizes scattering by
+    ``jitter``) as extents and, ``with_radii``, radii. The window and its estimates."""
+    rng = np.random.default_rng(seed)
+    w = FocalWindow(WindowOptions(max_frames=30))
+    out = []
+    for k in range(n):
+        z = zoom if k >= 20 else 1.0
+        bias, std, noise, scatter = after if k >= 20 else before
+        f = 600.0 * z * np.exp(bias + rng.normal(0, scatter))
+        sizes = _scene(rng, z, jitter=jitter)
+        out.append(w.add(estimate(f, std, std_rel_noise=noise, extents=sizes,
+                                  radii=sizes if with_radii else None), k / 30))
+    return w, out
+
+
 def test_a_zoom_the_radii_measure_keeps_the_older_frames_at_the_new_focal():
     """Frames that scatter by 6% through a 22% zoom at frame 20, in 20 sequences: where the
     objects' image radii measure the zoom, the window keeps its older frames at the new focal
@@ -287,22 +304,15 @@ def test_a_zoom_the_radii_measure_keeps_the_older_frames_at_the_new_focal():
     pooled) and errs by 0.84% (median over frames 21-29), where a window restarted with the
     frames since the zoom errs by 2.27%; its std_rel still covers."""
     errors, covered, zooms = {True: [], False: []}, [], []
+    frames = (0.0, 0.10, 0.01, 0.06)
     for with_radii in (True, False):
         for seed in range(20):
-            rng = np.random.default_rng(seed)
-            w = FocalWindow(WindowOptions(max_frames=30))
-            for k in range(30):
-                zoom = 1.22 if k >= 20 else 1.0
-                f = 600.0 * zoom * np.exp(rng.normal(0, 0.06))
-                sizes = _scene(rng, zoom)
-                r = w.add(estimate(f, 0.10, std_rel_noise=0.01, extents=sizes,
-                                   radii=sizes if with_radii else None), k / 30)
-                if r.zoom is not None:
-                    zooms.append(r.zoom)
-                if k > 20:
-                    error = abs(np.log(r.focal / (600.0 * zoom)))
-                    errors[with_radii].append(error)
-                    covered.append(error <= 2 * r.std_rel)
+            _, rs = _zoom_run(seed, 1.22, 30, frames, frames, with_radii=with_radii)
+            zooms += [r.zoom for r in rs if r.zoom is not None]
+            for r in rs[21:]:
+                error = abs(np.log(r.focal / (600.0 * 1.22)))
+                errors[with_radii].append(error)
+                covered.append(error <= 2 * r.std_rel)
     assert len(zooms) == 20 and max(abs(np.log(np.array(zooms) / 1.22))) < 0.015
     assert np.median(errors[True]) < 0.009 and np.median(errors[False]) > 0.02
     assert np.mean(covered) > 0.9
@@ -316,17 +326,11 @@ def test_precise_frames_measure_a_zoom_better_than_ragged_radii():
     sequence 5107 at x0.8 was carried 7% off by its radii alone, and stayed 5% off for 13
     frames.)"""
     zooms, worst = [], 0.0
+    frames = (0.0, 0.002, 0.001, 0.001)
     for seed in range(10):
-        rng = np.random.default_rng(seed)
-        w = FocalWindow(WindowOptions(max_frames=30))
-        for k in range(26):
-            zoom = 0.8 if k >= 20 else 1.0
-            f = 600.0 * zoom * np.exp(rng.normal(0, 0.001))
-            sizes = _scene(rng, zoom, jitter=0.04)
-            r = w.add(estimate(f, 0.002, std_rel_noise=0.001, extents=sizes, radii=sizes), k / 30)
-            zooms += [] if r.zoom is None else [r.zoom]
-            if k > 20:
-                worst = max(worst, abs(np.log(r.focal / (600.0 * zoom))))
+        w, rs = _zoom_run(seed, 0.8, 26, frames, frames, jitter=0.04)
+        zooms += [r.zoom for r in rs if r.zoom is not None]
+        worst = max([worst] + [abs(np.log(r.focal / 480.0)) for r in rs[21:]])
         assert w.changes == 1
     assert len(zooms) == 9 and max(abs(np.log(np.array(zooms) / 0.8))) < 0.003
     assert worst < 0.003
@@ -340,16 +344,9 @@ def test_frames_carried_through_a_zoom_weigh_less_by_the_error_of_their_old_view
     at full weight, they held it at -9.5 to -9.8% (std_rel 14.9%)."""
     carried = []
     for seed in range(10):
-        rng = np.random.default_rng(seed)
-        w = FocalWindow(WindowOptions(max_frames=30))
-        for k in range(26):
-            zoom = 1.25 if k >= 20 else 1.0
-            bias, std = (-0.12, 0.15) if k < 20 else (-0.01, 0.04)
-            f = 600.0 * zoom * np.exp(bias + rng.normal(0, 0.03))
-            sizes = _scene(rng, zoom)
-            r = w.add(estimate(f, std, std_rel_noise=0.03, extents=sizes, radii=sizes), k / 30)
+        w, rs = _zoom_run(seed, 1.25, 26, (-0.12, 0.15, 0.03, 0.03), (-0.01, 0.04, 0.03, 0.03))
         if len(w) == 26:
-            carried.append((np.log(r.focal / 750.0), r.std_rel))
+            carried.append((np.log(rs[-1].focal / 750.0), rs[-1].std_rel))
     assert len(carried) == 5
     assert all(-0.05 < e < -0.025 and s < 0.07 for e, s in carried), carried
 
