@@ -137,7 +137,6 @@ class FocalWindow:
         self._frames: deque[_Frame] = deque()
         self.current = WindowEstimate(None, reason=NO_FRAMES_YET)
         self.changes = 0
-        self._zoom: float | None = None  # the ratio the last change carried the frames by
 
     def __len__(self) -> int:
         return len(self._frames)
@@ -205,11 +204,10 @@ class FocalWindow:
         if self.options.max_age is not None:
             while self._frames and stamp - self._frames[0].stamp > self.options.max_age:
                 self._frames.popleft()
-        self._zoom = None
-        changed = self._detect_change() or new_size
+        changed, zoom = self._detect_change()
         self.current = self._estimate()
-        self.current.changed = changed
-        self.current.zoom = self._zoom
+        self.current.changed = changed or new_size
+        self.current.zoom = zoom
         return self.current
 
     def _rated(self):
@@ -221,14 +219,15 @@ class FocalWindow:
             np.array([f.noise for f in rated]),
         )
 
-    def _detect_change(self) -> bool:
-        """True (and the older frames dropped) when the newer frames moved away from the older
-        and, where the frames carry their objects' extents, the image scale moved with them."""
+    def _detect_change(self) -> tuple[bool, float | None]:
+        """(True, None) with the older frames dropped, or (True, the zoom) with them carried
+        through it, when the newer frames moved away from the older and, where the frames carry
+        their objects' extents, the image scale moved with them; (False, None) otherwise."""
         rated, y, v, noise = self._rated()
         k = self.options.change_frames
         n = y.size
         if n < 2 * k:
-            return False
+            return False, None
         sigma, least = self.options.change_sigma, np.log1p(self.options.change_threshold)
 
         def floor(c):
@@ -285,7 +284,7 @@ class FocalWindow:
                     hit = c
                     break
         if hit is None:
-            return False
+            return False, None
         best = None  # the scale that tells the zoom best places the split
         for scale, at in tracks:
             cs = judged(at, hit)
@@ -307,18 +306,17 @@ class FocalWindow:
             # do not tell the new one's.
             w = np.array([zoom[1], se]) ** -2.0
             excess = float(np.median(v[:hit] - noise[:hit]) - np.median(v[hit:] - noise[hit:]))
-            self._carry(first, float(w @ [zoom[0], step] / w.sum()), float(w.sum() ** -0.5),
-                        max(excess, 0.0))
-            return True
+            return True, self._carry(first, float(w @ [zoom[0], step] / w.sum()),
+                                     float(w.sum() ** -0.5), max(excess, 0.0))
         while self._frames[0] is not first:
             self._frames.popleft()
-        return True
+        return True, None
 
-    def _carry(self, first: _Frame, step: float, se: float, excess: float) -> None:
+    def _carry(self, first: _Frame, step: float, se: float, excess: float) -> float:
         """Keep the frames before ``first`` as if seen after the zoom: their focal lengths and
         image sizes moved by ``step`` (log), their variance by its variance ``se`` squared, and
         ``excess`` of their systematic budget (what it exceeds the newer frames' by) counted as
-        noise (see the module docstring)."""
+        noise (see the module docstring). Returns the zoom, a ratio."""
         for f in self._frames:
             if f is first:
                 break
@@ -328,7 +326,7 @@ class FocalWindow:
                 f.noise += min(excess, f.var - f.noise - f.prior)
             f.extents = {i: v + step for i, v in f.extents.items()}
             f.radii = {i: v + step for i, v in f.radii.items()}
-        self._zoom = float(np.exp(step))
+        return float(np.exp(step))
 
     def _estimate(self) -> WindowEstimate:
         rated, y, v, noise = self._rated()
