@@ -130,10 +130,11 @@ class Intake:
     def _waiting_hint(self, waiting, now: float) -> str:
         """Why the queued messages find nothing to match: inputs that never sent or stopped
         (SILENT_SECONDS), else inputs later than the queue covers."""
-        names = [self.inputs[i] for i in waiting]
-        never = [self.inputs[i] for i in waiting if not self._arrivals[i]]
-        stopped = [(self.inputs[i], now - self._arrivals[i][-1][1]) for i in waiting
-                   if self._arrivals[i] and now - self._arrivals[i][-1][1] >= SILENT_SECONDS]
+        every = self.ages(now)
+        ages = [every[i] for i in waiting]
+        names = [name for name, _ in ages]
+        never = [name for name, age in ages if age is None]
+        stopped = [(name, age) for name, age in ages if age is not None and age >= SILENT_SECONDS]
         if len(never) + len(stopped) < len(waiting):
             advice = self.queue_advice() or ("raise queue_size to cover that delay times "
                                              "their rate")
