@@ -9,7 +9,7 @@ zstd-compressed the way rosbag2 does it: MCAP chunks (storage compression, what 
 from __future__ import annotations
 
 import re
-
+import shutil
 import sqlite3
 from pathlib import Path
 
@@ -264,3 +264,12 @@ def not_a_bag_of(out_bag: Path, prefix: str) -> str:
         return ""
     foreign = [t for t in topics if not str(t).startswith(prefix)]
     return f"it records {foreign[0]}" if foreign else ""
+
+
+def remove_bag(path: Path) -> None:
+    """Remove a previous bag at ``path`` (checked with :func:`not_a_bag_of` first): a bag
+    directory, or a file or symbolic link in its place."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif path.exists() or path.is_symlink():
+        path.unlink()

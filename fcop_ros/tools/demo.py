@@ -3,7 +3,6 @@ print the summary (focal estimate against the truth) and where the report is."""
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -35,7 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    from .bagio import BagError, not_a_bag_of
+    from .bagio import BagError, not_a_bag_of, remove_bag
     from .replay_base import ReplayError
 
     args = build_parser().parse_args(argv)
@@ -52,10 +51,7 @@ def main(argv=None) -> int:
         if why:
             raise ValueError(f"{bag} exists and is not a bag fcop_demo wrote ({why}): move it "
                              "away or choose another --out")
-        if bag.is_dir() and not bag.is_symlink():
-            shutil.rmtree(bag)
-        elif bag.exists() or bag.is_symlink():
-            bag.unlink()
+        remove_bag(bag)
         out.mkdir(parents=True, exist_ok=True)
     except (ValueError, OSError) as exc:
         print(f"fcop_demo: {exc}", file=sys.stderr)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..ros.dds import use_large_image_profile
 from ..ros.spin import spin_until as spin
-from .bagio import BagError, BagSource, BagWriter, error_text, not_a_bag_of
+from .bagio import BagError, BagSource, BagWriter, error_text, not_a_bag_of, remove_bag
 from .estimates_csv import EstimatesCsv
 from .replay_base import (
     IMAGE_TYPE,
@@ -100,14 +100,8 @@ def _prepare_out(out_dir) -> Path:
 
 def _clear_output_bag(out_bag: Path) -> None:
     """Remove the previous output bag (checked by _prepare_out); OutputError if impossible."""
-    if out_bag.is_dir() and not out_bag.is_symlink():
-        import shutil
-
-        with writing(f"{out_bag} (removing the previous output bag)"):
-            shutil.rmtree(out_bag)
-    elif out_bag.exists() or out_bag.is_symlink():
-        with writing(f"{out_bag} (removing the previous output bag)"):
-            out_bag.unlink()
+    with writing(f"{out_bag} (removing the previous output bag)"):
+        remove_bag(out_bag)
 
 
 def _note_held_back(node, summary: ReplaySummary, seen: list) -> None:
