@@ -107,16 +107,14 @@ def _clear_output_bag(out_bag: Path) -> None:
 def _note_held_back(node, summary: ReplaySummary, seen: list) -> None:
     """Count the frames the node estimated since the last call whose focal the publish gate
     held back (max_uncertainty, focal_min..focal_max): a run that published nothing says so
-    instead of blaming its topics. ``seen``: [frames processed at the last call]."""
-    from ..ros.gate import held_back
-    from ..ros.params import gate_settings
-
+    instead of blaming its topics. ``seen``: [frames processed at the last call]. Called
+    once the node is idle, so its tracker is read between frames."""
     processed = node.counts.processed
     new, seen[0] = processed - seen[0], processed
     win = node.window_estimate
     if new <= 0 or win is None or getattr(win, "focal", None) is None:
         return
-    why = held_back(win, *gate_settings(node.p))
+    why = node.tracker.held_back()  # the node's own gate, with the settings it holds
     if why:
         summary.held_back += new
         summary.held_reason = why
