@@ -67,7 +67,7 @@ frames' focal lengths and sizes move by the zoom, their systematic budget grows 
 variance, and the part of their budget beyond the newer frames' counts as their noise: it
 belongs to the view before the zoom, and they weigh less by it. On 48 development zoom
 sequences of the tuning world (x1.25 and x0.8), 39 rather than 36 were within 5% for good in
-15 frames (docs/BENCHMARKS.md).
+15 frames (bench/zoom_carry.py, docs/BENCHMARKS.md).
 
 A change of image size starts a new window. The settings are a :class:`WindowOptions`.
 """
