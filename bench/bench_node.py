@@ -278,8 +278,8 @@ def main() -> None:
             lambda: (
                 state["k"] >= args.frames
                 and node.idle()
-                and np.count_nonzero(~np.isnan(posed)) >= node.published
-                and np.count_nonzero(~np.isnan(info_got)) >= node.camera_info_published
+                and np.count_nonzero(~np.isnan(posed)) >= node.counts.frames_published
+                and np.count_nonzero(~np.isnan(info_got)) >= node.counts.camera_info_published
             ),
             timeout=args.frames / args.rate * 4 + 30,
         )
@@ -305,7 +305,7 @@ def main() -> None:
             f"paced at {args.rate:.0f} Hz: {answered}/{n} depth images got their CameraInfo "
             f"({answered / wall:.1f} CameraInfo/s over {wall:.1f} s); the estimator took "
             f"{node.processed} frames ({node.processed / wall:.1f}/s), skipped "
-            f"{node.handoff_dropped} for newer ones; sync drops {node.sync.stats.dropped_total}"
+            f"{node.counts.skipped} for newer ones; sync drops {node.sync.stats.dropped_total}"
         )
         print(f"  latency depth published -> CameraInfo received: "
               f"{ms_stats(info_got[:n] - sent[:n])}")

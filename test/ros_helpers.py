@@ -95,7 +95,7 @@ class Harness:
         node = self.node
         if processed is None:
             return spin_until(self.ex, lambda: node.received and node.idle() and (
-                node.processed + node.handoff_dropped >= node.sync.stats.matched), timeout)
+                node.processed + node.counts.skipped >= node.sync.stats.matched), timeout)
         return spin_until(self.ex, lambda: node.processed >= processed and node.idle(), timeout)
 
     def frame(self, msgs):

@@ -60,16 +60,16 @@ def test_readme_lists_every_diagnostics_value_the_node_sends():
     from fcop_ros.ros.diagnostics import DiagnosticsInput, Rates, status_fields
 
     reading = DiagnosticsInput(
-        now=1.0, window=WindowEstimate(600.0, std_rel=0.01, support=50, frames=3),
+        now=1.0, window_estimate=WindowEstimate(600.0, std_rel=0.01, support=50, frames=3),
         publishable=True, window_fill="3/30", max_uncertainty=0.05, max_estimate_age=2.0,
         matched=3, processed=3, skipped=0, sync_dropped=0, camera_info_published=3,
         input_ages=(("depth", 0.01), ("nocs", 0.02), ("mask", 0.02)))
     sent = set(status_fields(reading, Rates(5.0, 3, 3, 0))[2])
     text = open(os.path.join(ROOT, "README.md")).read()
     listed = text[text.index("Values:\n`focal_px`"):].split("\n\n")[0]
-    named = set(re.findall(r"`(\w+)`", listed)) - {"rejected_", "warning_"}
+    named = set(re.findall(r"`(\w+)`", listed)) - {"dropped_", "warning_"}
     assert named == sent, (sorted(sent - named), sorted(named - sent))
-    assert "`rejected_<reason>`" in listed and "`warning_<reason>`" in listed
+    assert "`dropped_<reason>`" in listed and "`warning_<reason>`" in listed
 
 
 def test_the_node_defaults_are_the_library_defaults():
@@ -101,7 +101,7 @@ def test_design_owner_table_names_files_and_names_that_exist():
 
 
 def test_readme_lists_every_reason_the_node_counts_a_drop_by():
-    """The README's table of drop reasons (`rejected_<reason>` in /diagnostics) against the
+    """The README's table of drop reasons (`dropped_<reason>` in /diagnostics) against the
     reasons the code counts: the synchroniser's drops (sync_<reason>, outlier_stamp_<input>),
     the refusals of a frame (Refused subclasses) and the node's own counters."""
     from fcop_ros.ros.topics import INPUTS
@@ -118,5 +118,5 @@ def test_readme_lists_every_reason_the_node_counts_a_drop_by():
     counted |= {f"outlier_stamp_{i}" for i in INPUTS}
     counted |= set(re.findall(r'Refused\(\s*"([a-z_]+)"', code))
     counted |= set(re.findall(r'(?<!stats\.)(?:rejected|dropped)\["([a-z_]+)"\]', code))
-    counted |= set(re.findall(r'_reject\("([a-z_]+)"', code))
+    counted |= set(re.findall(r'(?:_reject|no_focal)\("([a-z_]+)"', code))
     assert documented == counted, (sorted(documented - counted), sorted(counted - documented))

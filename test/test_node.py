@@ -77,7 +77,7 @@ def test_camera_info_per_input_stamp_within_bound(harness):
             assert marker.type == Marker.CUBE and marker.scale.x > 0
     assert np.median(rot) < ROT_MEDIAN_BOUND_DEG
     assert np.median(trans) < TRANS_MEDIAN_BOUND
-    assert h.node.rejected.total() == 0
+    assert h.node.counts.dropped.total() == 0
 
 
 def test_remapping_and_params_file(harness):
@@ -232,7 +232,7 @@ def test_a_frame_that_outlives_destroy_node_fails_quietly(harness, monkeypatch, 
     gate.open()
     h.node.worker._thread.join(10)
     assert not h.node.worker._thread.is_alive()
-    assert h.node.rejected["exception"] == 0
+    assert h.node.counts.dropped["exception"] == 0
     assert "failed" not in capfd.readouterr().err
 
 
@@ -245,7 +245,7 @@ def test_a_frame_in_progress_at_ctrl_c_fails_quietly(harness, monkeypatch, capfd
     monkeypatch.setattr(h.node.context, "ok", lambda: False)
     assert not h.node.worker.stopping
     h.node._on_worker_error((T0, None), RCLError("publisher's context is invalid"))
-    assert h.node.rejected["exception"] == 0
+    assert h.node.counts.dropped["exception"] == 0
     assert "failed" not in capfd.readouterr().err
 
 
@@ -346,9 +346,9 @@ def test_bad_content_never_publishes(harness, case):
     h.send(frame_messages(corrupted(clean_frame(0), case), T0))
     assert h.settle(1)
     assert (
-        h.node.camera_info_published == 0
+        h.node.counts.camera_info_published == 0
         and len(h.info) == 0
-        and h.node.rejected["no_evidence"] == 1
+        and h.node.counts.dropped["no_evidence"] == 1
     )
 
 
@@ -365,8 +365,9 @@ def test_wrong_encoding_and_size_mismatch(harness):
     n2 = frame_messages(fr, T0 + DT)
     h.send((small[0], n2[1], n2[2]))
     assert h.settle(2)
-    assert h.node.rejected["bad_encoding"] == 1 and h.node.rejected["size_mismatch"] == 1
-    assert h.node.camera_info_published == 0 and len(h.info) == 0
+    dropped = h.node.counts.dropped
+    assert dropped["bad_encoding"] == 1 and dropped["size_mismatch"] == 1
+    assert h.node.counts.camera_info_published == 0 and len(h.info) == 0
     # The node is alive and still estimates.
     h.send(frame_messages(fr, T0 + 2 * DT))
     assert spin_until(h.ex, lambda: len(h.info) == 1, 20)
@@ -377,19 +378,19 @@ def test_stamps_backwards_and_silent_topic(harness, capfd):
     fr = clean_frame(0)
     assert h.frame(frame_messages(fr, T0 + 10 * DT))
     h.send(frame_messages(fr, T0 + 5 * DT))  # slightly back: late, dropped
-    assert spin_until(h.ex, lambda: h.node.rejected["sync_late"] == 3, 10)
+    assert spin_until(h.ex, lambda: h.node.counts.dropped["sync_late"] == 3, 10)
     assert h.node.sync.stats.matched == 1
     # One input silent: nothing is matched, the other queues stay bounded (drop oldest). Its
     # silence shows once no frame has matched for 5 s (before, drops are how a slower input
     # meets a faster one): the node's clock is moved on past that.
     later = time.monotonic() + 6.0
     h.node._now = lambda: later
-    seen = lambda: h.node.sync.pending() + h.node.rejected["sync_queue_full"]  # noqa: E731
+    seen = lambda: h.node.sync.pending() + h.node.counts.dropped["sync_queue_full"]  # noqa: E731
     for k in range(12):
         h.send(frame_messages(fr, T0 + (20 + k) * DT), which=(0, 1))
         # one frame at a time: no DDS-side loss
         assert spin_until(h.ex, lambda: seen() == 2 * (k + 1), 10)
-    assert h.node.rejected["sync_queue_full"] == 14
+    assert h.node.counts.dropped["sync_queue_full"] == 14
     # the log names the inputs dropped and the silent one they waited for
     err = capfd.readouterr().err
     assert "in the synchroniser: queue full (depth 1)" in err
@@ -402,23 +403,24 @@ def test_stamps_backwards_and_silent_topic(harness, capfd):
         assert spin_until(h.ex, lambda: h.node.received == 3 + 3 + 24 + 3 * (k + 1), 10)
     assert h.settle()
     assert h.node.sync.stats.resets == 1 and h.node.sync.stats.matched == 4
-    assert h.node.rejected["sync_time_jump_reset"] == 10  # the depth and NOCS waiting for a mask
+    # the depth and NOCS waiting for a mask
+    assert h.node.counts.dropped["sync_time_jump_reset"] == 10
     assert (
-        h.node.rejected.total()
-        == h.node.rejected["sync_late"]
-        + h.node.rejected["sync_queue_full"]
-        + h.node.rejected["estimator_busy"]
+        h.node.counts.dropped.total()
+        == h.node.counts.dropped["sync_late"]
+        + h.node.counts.dropped["sync_queue_full"]
+        + h.node.counts.dropped["estimator_busy"]
         + 10
     )
     assert (
         h.node.window.current.focal is not None
-        and len(h.node.window) + h.node.handoff_dropped == 3
+        and len(h.node.window) + h.node.counts.skipped == 3
     )
     # The held frames come out at once and replace each other in the hand-off: not a slow
     # estimator, which every lap of a looped bag used to log (a hostile trial).
     err = capfd.readouterr().err
     assert "the estimator is slower than the input" not in err
-    assert h.node.handoff_dropped == 0 or "3 frames matched at once" in err, err
+    assert h.node.counts.skipped == 0 or "3 frames matched at once" in err, err
 
 
 @pytest.mark.parametrize("bad", [0, T0 + 3600 * 10**9])  # stamped 0; an hour ahead
@@ -430,12 +432,12 @@ def test_isolated_outlier_stamp_keeps_the_window(harness, capfd, bad):
     assert spin_until(h.ex, lambda: h.node.sync.held() == 3, 10)
     assert h.frame(frame_messages(cam(4), T0 + 4 * DT))
     assert len(h.node.window) == 4 and h.node.sync.stats.resets == 0
-    assert {k: v for k, v in h.node.rejected.items() if v} == {
+    assert {k: v for k, v in h.node.counts.dropped.items() if v} == {
         "outlier_stamp_depth": 1, "outlier_stamp_nocs": 1, "outlier_stamp_mask": 1}
     assert spin_until(h.ex, lambda: len(h.info) == 4, 10), (
         [stamp_ns(m) - T0 for m in h.info.msgs],
-        h.node.camera_info_published,
-        h.node.rejected,
+        h.node.counts.camera_info_published,
+        h.node.counts.dropped,
     )
     assert bad not in [stamp_ns(m) for m in h.info.msgs]  # no CameraInfo with the bogus stamp
     err = capfd.readouterr().err
@@ -454,7 +456,7 @@ def test_only_the_mask_stamped_zero_is_named_and_never_resets(harness, capfd):
         h.send((d, n, m))
         assert spin_until(h.ex, lambda: h.node.received == 3 * (k + 1), 10)
     assert h.node.sync.stats.resets == 0 and len(h.node.window) == 1
-    assert h.node.rejected["outlier_stamp_mask"] == 4  # the fifth is still held
+    assert h.node.counts.dropped["outlier_stamp_mask"] == 4  # the fifth is still held
     assert "mask message(s) with an outlier stamp" in capfd.readouterr().err
 
 
@@ -467,8 +469,8 @@ def test_mirrored_nocs_are_warned_not_counted_as_rejected(harness, capfd):
     fr = clean_frame(4)
     fr = replace(fr, nocs=np.ascontiguousarray(fr.nocs[..., ::-1]))
     assert h.frame(frame_messages(fr, T0))
-    assert h.node.warnings["mirrored_nocs"] >= 1
-    assert h.node.rejected.total() == 0 and len(h.node.window) == 1
+    assert h.node.counts.warnings["mirrored_nocs"] >= 1
+    assert h.node.counts.dropped.total() == 0 and len(h.node.window) == 1
     assert abs(h.node.window_estimate.focal / fr.focal - 1) < 1e-2
     assert "only as a mirror image" in capfd.readouterr().err
 
@@ -481,14 +483,14 @@ def test_mismatched_and_empty_frame_ids_are_warned(harness, capfd):
     d, n, m = frame_messages(clean_frame(4), T0 + DT)
     m.header = header_from_ns(T0 + DT, "")
     assert h.frame((d, n, m))
-    assert h.node.warnings == {"frame_id_mismatch": 1, "frame_id_empty": 1}
+    assert h.node.counts.warnings == {"frame_id_mismatch": 1, "frame_id_empty": 1}
     d, n, m = frame_messages(clean_frame(4), T0 + 2 * DT)  # both at once: each is counted
     n.header, m.header = header_from_ns(T0 + 2 * DT, "nocs_frame"), header_from_ns(T0 + 2 * DT, "")
     assert h.frame((d, n, m))
-    assert h.node.warnings == {"frame_id_mismatch": 2, "frame_id_empty": 2}
+    assert h.node.counts.warnings == {"frame_id_mismatch": 2, "frame_id_empty": 2}
     err = capfd.readouterr().err
     assert "nocs 'nocs_frame'" in err and "mask ''" in err
-    assert h.node.rejected.total() == 0 and len(h.node.window) == 3  # warned, still used
+    assert h.node.counts.dropped.total() == 0 and len(h.node.window) == 3  # warned, still used
 
 
 def test_header_is_copied_from_depth(harness):
@@ -516,7 +518,7 @@ def test_every_depth_image_gets_one_camera_info_while_the_estimator_is_stuck(har
             # for it.
             assert spin_until(h.ex, lambda: len(h.info) == k + 1, 10)
         # frames 2..8 replaced by newer ones
-        assert h.node.processed == 1 and h.node.handoff_dropped == 7
+        assert h.node.processed == 1 and h.node.counts.skipped == 7
     finally:
         gate.open()
     assert h.settle()
@@ -526,7 +528,7 @@ def test_every_depth_image_gets_one_camera_info_while_the_estimator_is_stuck(har
     assert all(abs(m.k[0] / 600.0 - 1) < 1e-3 for m in h.info.msgs)
     # The estimator went from frame 1 straight to the newest, frame 9: no backlog.
     assert [stamp_ns(m) for m in h.poses.msgs] == [T0, T0 + DT, T0 + 9 * DT]
-    assert h.node.rejected["estimator_busy"] == 7
+    assert h.node.counts.dropped["estimator_busy"] == 7
 
 
 def test_diagnostics_error_when_the_estimator_stalls_and_warn_when_behind(
@@ -554,7 +556,7 @@ def test_diagnostics_error_when_the_estimator_stalls_and_warn_when_behind(
         # The first message built after all ten frames were in (one built earlier has fewer drops).
         def after_all(m):
             return {kv.key: kv.value for kv in m.status[0].values}.get(
-                "rejected_estimator_busy"
+                "dropped_estimator_busy"
             ) == "8"
 
         assert spin_until(h.ex, lambda: rec.msgs and after_all(rec.msgs[-1])
@@ -609,7 +611,7 @@ def test_a_stray_frame_of_another_size_without_evidence_keeps_the_window(harness
              nocs_to_image(np.zeros((16, 16, 3), np.float32), "32FC3", hdr),
              mask_to_image(np.zeros((16, 16), np.uint8), "mono8", hdr))
     assert h.frame(stray)
-    assert h.node.rejected["other_size_no_evidence"] == 1 and len(h.node.window) == 3
+    assert h.node.counts.dropped["other_size_no_evidence"] == 1 and len(h.node.window) == 3
     assert abs(h.node.window.current.focal / 300.0 - 1) < 1e-3
     assert h.node.diagnostic_status().level == DiagnosticStatus.OK
     for k in range(4, 6):
@@ -647,7 +649,7 @@ def test_frames_refused_for_their_encoding_warn_and_name_the_newest(harness):
         flat = Image(header=n.header, height=n.height, width=n.width, encoding="32FC1",
                      step=n.width * 4, data=bytes(n.width * n.height * 4))
         assert h.frame((d, flat, m))
-    assert h.node.rejected["bad_encoding"] == 6
+    assert h.node.counts.dropped["bad_encoding"] == 6
     st = h.node.diagnostic_status()
     assert st.level == DiagnosticStatus.WARN, st.message
     assert "6 of the " in st.message and "(the newest: rejected: " in st.message
@@ -669,7 +671,7 @@ def test_frames_that_fail_count_as_frames_without_a_focal(harness, monkeypatch, 
     monkeypatch.setattr("fcop_ros.ros.node.estimate_frame", broken)
     for k in range(3, 9):
         assert h.frame(frame_messages(clean_frame(1), T0 + k * DT))
-    assert h.node.rejected["exception"] == 6
+    assert h.node.counts.dropped["exception"] == 6
     st = h.node.diagnostic_status()
     assert st.level == DiagnosticStatus.WARN, st.message
     assert "6 of the 9 frames" in st.message, st.message
@@ -691,6 +693,14 @@ def test_frames_that_fail_from_the_start_are_not_called_no_frames(harness, monke
     st = h.node.diagnostic_status()
     assert ("no focal estimate yet: none of the 3 frames estimated reached the window; the "
             "newest frame: failed: RuntimeError: boom") in st.message, st.message
+    # The count starts again with the window: after ~/reset, the frames since it (the window
+    # used to be judged by its reason's words, and said 'window reset' however many failed).
+    h.node._on_reset(Trigger.Request(), Trigger.Response())
+    for k in range(3, 5):
+        assert h.frame(frame_messages(clean_frame(1), T0 + k * DT))
+    st = h.node.diagnostic_status()
+    assert ("no focal estimate yet: none of the 2 frames estimated reached the window; the "
+            "newest frame: failed: RuntimeError: boom") in st.message, st.message
 
 
 def test_after_a_reset_a_frame_of_another_size_is_no_stray(harness, capfd):
@@ -705,8 +715,8 @@ def test_after_a_reset_a_frame_of_another_size_is_no_stray(harness, capfd):
             nocs_to_image(np.zeros((16, 16, 3), np.float32), "32FC3", hdr),
             mask_to_image(np.zeros((16, 16), np.uint8), "mono8", hdr))
     assert h.frame(tiny)
-    assert h.node.rejected["other_size_no_evidence"] == 0
-    assert h.node.rejected["no_evidence"] == 1
+    assert h.node.counts.dropped["other_size_no_evidence"] == 0
+    assert h.node.counts.dropped["no_evidence"] == 1
     assert "keeps its 640x480" not in capfd.readouterr().err
 
 
@@ -718,7 +728,7 @@ def test_depth_without_nocs_ages_the_estimate_and_diagnostics_say_so(harness):
     assert h.node.diagnostic_status().level == DiagnosticStatus.OK
     for k in range(1, 4):
         h.send(frame_messages(clean_frame(1), T0 + k * DT), which=(0,))  # depth only
-    assert spin_until(h.ex, lambda: h.node.camera_info_published == 4, 10)
+    assert spin_until(h.ex, lambda: h.node.counts.camera_info_published == 4, 10)
     st = h.node.diagnostic_status()
     assert st.level == DiagnosticStatus.WARN, st.message
     assert "3 depth images" in st.message and "no matched depth, NOCS and mask set" in st.message
@@ -727,7 +737,7 @@ def test_depth_without_nocs_ages_the_estimate_and_diagnostics_say_so(harness):
     later = time.monotonic() + 6.0
     h.node._now = lambda: later
     h.send(frame_messages(clean_frame(1), T0 + 4 * DT), which=(0,))
-    assert spin_until(h.ex, lambda: h.node.camera_info_published == 5, 10)
+    assert spin_until(h.ex, lambda: h.node.counts.camera_info_published == 5, 10)
     st = h.node.diagnostic_status()
     assert "no nocs message for 6." in st.message and "no mask message for 6." in st.message
     values = {kv.key: float(kv.value) for kv in st.values if kv.key.endswith("_age_s")}

@@ -152,7 +152,8 @@ def test_camera_info_in_with_nan_is_ignored_and_counted(harness, capfd):
         bad = driver_info()
         setattr(bad, field, [float("nan")] * len(getattr(bad, field)))
         pub.publish(bad)
-        assert spin_until(h.ex, lambda: h.node.rejected["camera_info_in_not_finite"] == n, 10)
+        assert spin_until(
+            h.ex, lambda: h.node.counts.dropped["camera_info_in_not_finite"] == n, 10)
     assert h.frame(frame_messages(cam(0), T0))
     assert spin_until(h.ex, lambda: len(h.info) == 1, 10)
     out = h.info.msgs[0]
@@ -165,7 +166,8 @@ def test_camera_info_in_of_another_size_rejects_frames(harness):
     send_driver_info(h, driver_info(1280, 960))
     h.send(frame_messages(cam(0), T0))
     assert h.settle(1)
-    assert h.node.rejected["camera_info_size_mismatch"] == 1 and h.node.camera_info_published == 0
+    counts = h.node.counts
+    assert counts.dropped["camera_info_size_mismatch"] == 1 and counts.camera_info_published == 0
     assert h.node.window.current.focal is None
 
 
@@ -181,7 +183,7 @@ def test_camera_info_in_of_another_size_after_an_estimate_says_why_none_goes_out
     pub = send_driver_info(h, driver_info(640, 480))
     for msgs in small[1:3]:
         assert h.frame(msgs)
-    assert h.node.rejected["camera_info_size_mismatch"] == 2 and len(h.info) == 1
+    assert h.node.counts.dropped["camera_info_size_mismatch"] == 2 and len(h.info) == 1
     status = h.node.diagnostic_status()
     assert status.level == DiagnosticStatus.WARN, status.message
     assert ("held back: no CameraInfo: camera_info_in is 640x480, the images are 320x240"
@@ -298,7 +300,7 @@ def test_nocs_convention_focal_and_pose(harness, convention, data, right):
         # The other five are shapes whose mirror image is also a rotation of them; now and
         # then (1 of 40 seeds of the same frames) the pose fit finds one of them mirrored too.
         assert 4 <= posed <= 5 and min(rot) > 50.0, rot
-        assert h.node.warnings["mirrored_nocs"] == 10
+        assert h.node.counts.warnings["mirrored_nocs"] == 10
 
 
 def test_output_qos_is_what_the_readme_says(harness):

@@ -358,12 +358,12 @@ def test_focal_range_set_at_run_time_bounds_every_published_focal(harness, chang
         return clean_frame(k, 320, 240, 300.0)
     frames_then(h, 3, frame=small)
     assert abs(h.node.window.current.focal / 300.0 - 1) < 1e-3 and h.node.latest is not None
-    published = h.node.camera_info_published
+    published = h.node.counts.camera_info_published
     set_ok(h, **change)
     st = h.node.diagnostic_status()
     assert st.level == DiagnosticStatus.WARN and "outside focal_range" in st.message, st.message
     frames_then(h, 2, first=3, frame=small)  # each depth image is answered in its callback
-    assert h.node.camera_info_published == published
+    assert h.node.counts.camera_info_published == published
     assert abs(h.node.window.current.focal / 300.0 - 1) < 1e-3  # still in the window, held back
     st = h.node.diagnostic_status()
     assert st.level == DiagnosticStatus.WARN and "outside focal_range" in st.message, st.message
@@ -371,14 +371,14 @@ def test_focal_range_set_at_run_time_bounds_every_published_focal(harness, chang
     assert not res.success and "outside focal_range" in res.message, res.message
     set_ok(h, focal_min=50.0, focal_max=20000.0)  # back: the window's focal is published again
     frames_then(h, 1, first=5, frame=small)
-    assert h.node.camera_info_published == published + 1
+    assert h.node.counts.camera_info_published == published + 1
     assert h.node.diagnostic_status().level == DiagnosticStatus.OK
 
 def check_min_object_pixels(h):
     frames_then(h, 1)
     set_ok(h, min_object_pixels=10_000_000)
     frames_then(h, 1, first=1)
-    assert h.node.last_estimate.focal is None and h.node.rejected["no_evidence"] == 1
+    assert h.node.last_estimate.focal is None and h.node.counts.dropped["no_evidence"] == 1
 
 
 def check_depth_scale(h):
@@ -449,7 +449,7 @@ def check_publish_poses(h):
     set_ok(h, publish_poses=False)
     frames_then(h, 1, first=1)
     assert spin_until(h.ex, lambda: len(h.markers) == 2, 10)
-    assert h.node.published == 2 and len(h.poses) == 1
+    assert h.node.counts.frames_published == 2 and len(h.poses) == 1
 
 
 def check_publish_markers(h):
@@ -458,7 +458,7 @@ def check_publish_markers(h):
     set_ok(h, publish_markers=False)
     frames_then(h, 1, first=1)
     assert spin_until(h.ex, lambda: len(h.poses) == 2, 10)
-    assert h.node.published == 2 and len(h.markers) == 1
+    assert h.node.counts.frames_published == 2 and len(h.markers) == 1
 
 
 def check_max_uncertainty(h):
@@ -469,7 +469,7 @@ def check_max_uncertainty(h):
     std = h.node.window.current.std_rel
     set_ok(h, max_uncertainty=max(std / 10, 1e-6))  # held back now
     frames_then(h, 1, first=1, frame=lambda k: moderate(1))
-    assert h.node.camera_info_published == 1
+    assert h.node.counts.camera_info_published == 1
     assert h.node.diagnostic_status().level == DiagnosticStatus.WARN
     set_ok(h, max_uncertainty=0.05)  # published again, for the next depth image
     frames_then(h, 1, first=2, frame=lambda k: moderate(1))
@@ -573,7 +573,8 @@ def test_principal_point_outside_the_image_is_refused(harness):
     h = harness(parameter_overrides=[Parameter("principal_point_x", value=700.0)])
     h.send(frame_messages(cam(0), T0))
     assert h.settle(1)
-    assert h.node.rejected["principal_point_outside"] == 1 and h.node.camera_info_published == 0
+    counts = h.node.counts
+    assert counts.dropped["principal_point_outside"] == 1 and counts.camera_info_published == 0
     set_ok(h, principal_point_x=320.0)
     assert h.frame(frame_messages(cam(0), T0 + DT))
     assert spin_until(h.ex, lambda: len(h.info) == 1, 10) and h.info.msgs[0].k[2] == 320.0

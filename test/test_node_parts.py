@@ -446,7 +446,7 @@ def test_worker_runs_before_once_ahead_of_the_first_item():
 def _reading(**kw):
     base = {
         "now": 10.0,
-        "window": WindowEstimate(600.0, std_rel=0.01, support=500, frames=5),
+        "window_estimate": WindowEstimate(600.0, std_rel=0.01, support=500, frames=5),
         "publishable": True,
         "window_fill": "5/30",
         "max_uncertainty": 0.05,
@@ -466,7 +466,7 @@ QUIET = Rates(span=5.0, matched=150, processed=150, skipped=0)
 
 
 def test_diagnostics_ok_reports_the_estimate_and_timing():
-    level, message, values = status_fields(_reading(rejected={"no_evidence": 2}), QUIET)
+    level, message, values = status_fields(_reading(dropped={"no_evidence": 2}), QUIET)
     assert level == DiagnosticStatus.OK and message == "focal 600.0 px"
     assert (
         values["focal_px"] == "600.000"
@@ -474,7 +474,7 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
         and values["support_votes"] == "500"
     )
     assert values["frame_rate_hz"] == "30.00" and values["processing_ms_median"] == "20.00"
-    assert values["processing_ms_max"] == "30.00" and values["rejected_no_evidence"] == "2"
+    assert values["processing_ms_max"] == "30.00" and values["dropped_no_evidence"] == "2"
 
 
 @pytest.mark.parametrize(
@@ -487,13 +487,13 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "estimator stalled: busy with one frame for 3.0 s",
         ),
         (
-            {"window": WindowEstimate(None, reason="no frames")},
+            {"window_estimate": WindowEstimate(None, reason="no frames")},
             QUIET,
             DiagnosticStatus.WARN,
             "no focal estimate yet: no frames",
         ),
         (
-            {"window": WindowEstimate(None, reason="0 frames with focal evidence"),
+            {"window_estimate": WindowEstimate(None, reason="0 frames with focal evidence"),
              "last_reason": "NOCS channel 2 is 0.500 on every object"},
             QUIET,
             DiagnosticStatus.WARN,
@@ -507,13 +507,13 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "5.0 s gave no focal (the newest: NOCS outside [0, 1])",
         ),
         (
-            {"window": WindowEstimate(None, reason="no frames"), "warming_up": True},
+            {"window_estimate": WindowEstimate(None, reason="no frames"), "warming_up": True},
             QUIET,
             DiagnosticStatus.WARN,
             "no focal estimate yet: the estimator is preparing its kernels",
         ),
         (
-            {"publishable": False, "window": WindowEstimate(600.0, std_rel=0.2)},
+            {"publishable": False, "window_estimate": WindowEstimate(600.0, std_rel=0.2)},
             QUIET,
             DiagnosticStatus.WARN,
             "held back: std_rel 0.2000 above max_uncertainty 0.05",
@@ -544,8 +544,9 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "150 depth images in the last 5.0 s but no matched depth, NOCS and mask set",
         ),  # a reviewer stopped the NOCS topic: CameraInfo went on, diagnostics said OK
         (
-            {"window": WindowEstimate(None, reason="no frames yet"), "processed": 0, "matched": 0,
-             "sync_dropped": 166, "rejected": {"sync_unmatched": 166}},
+            {"window_estimate": WindowEstimate(None, reason="no frames yet"), "processed": 0,
+             "matched": 0,
+             "sync_dropped": 166, "dropped": {"sync_unmatched": 166}},
             Rates(5.0, 0, 0, 0),
             DiagnosticStatus.WARN,
             "no focal estimate yet: no frames yet; no depth, NOCS and mask set has matched: 166 "
@@ -553,8 +554,8 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "stamps; sync_mode approximate matches within sync_slop)",
         ),  # a hostile trial: NOCS and mask stamped 3 and 6 ms after depth; no hint before
         (
-            {"window": WindowEstimate(None, reason="window reset"), "matched": 0,
-             "sync_dropped": 399, "rejected": {"sync_queue_full": 399}},
+            {"window_estimate": WindowEstimate(None, reason="window reset"), "matched": 0,
+             "sync_dropped": 399, "dropped": {"sync_queue_full": 399}},
             Rates(5.0, 0, 0, 0),
             DiagnosticStatus.WARN,
             "399 messages dropped from full queues: an input is stamped further behind the "
@@ -562,8 +563,9 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "others' rate)",
         ),  # the same trial: NOCS and mask 300 ms late at 30 Hz, queue_size 5
         (
-            {"window": WindowEstimate(None, reason="no frames yet"), "processed": 0, "matched": 0,
-             "sync_dropped": 399, "rejected": {"sync_queue_full": 399},
+            {"window_estimate": WindowEstimate(None, reason="no frames yet"), "processed": 0,
+             "matched": 0,
+             "sync_dropped": 399, "dropped": {"sync_queue_full": 399},
              "queue_advice": "nocs comes 250 ms after the depth of its stamp, at 30 Hz: "
                              "queue_size must be above 7.5"},
             Rates(5.0, 0, 0, 0),
@@ -572,7 +574,7 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "its stamp, at 30 Hz: queue_size must be above 7.5)",
         ),  # the re-run trial: the rule, but no number
         (
-            {"sync_dropped": 900, "rejected": {"sync_queue_full": 800, "sync_unmatched": 100},
+            {"sync_dropped": 900, "dropped": {"sync_queue_full": 800, "sync_unmatched": 100},
              "input_ages": (("depth", 0.01), ("nocs", 6.2), ("mask", 6.2))},
             Rates(5.0, 0, 0, 0, answered=150),
             DiagnosticStatus.WARN,
@@ -588,15 +590,16 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "or topics remapped?)",
         ),  # the same trial: every input stopped, diagnostics said OK for 20 s
         (
-            {"window": WindowEstimate(None, reason="no frames yet"), "processed": 0,
+            {"window_estimate": WindowEstimate(None, reason="no frames yet"), "processed": 0,
              "input_ages": (("depth", 0.02), ("nocs", None), ("mask", None))},
             Rates(5.0, 0, 0, 0, answered=150),
             DiagnosticStatus.WARN,
             "no focal estimate yet: no frames yet",
         ),  # never heard from nocs and mask: the depth came only now, not silent yet
         (
-            {"window": WindowEstimate(None, reason="no frames yet"), "processed": 0, "matched": 0,
-             "sync_dropped": 40, "rejected": {"sync_queue_full": 40},
+            {"window_estimate": WindowEstimate(None, reason="no frames yet"), "processed": 0,
+             "matched": 0,
+             "sync_dropped": 40, "dropped": {"sync_queue_full": 40},
              "input_ages": (("depth", 0.01), ("nocs", 0.01), ("mask", None)),
              "since_first_input": 12.0},
             Rates(5.0, 0, 0, 0, answered=150),
@@ -605,7 +608,7 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "mask message for 12.0 s (silent, or its topic remapped elsewhere?)",
         ),  # a hostile trial: the mask never sent, and for 12 s the advice was queue_size
         (
-            {"window": WindowEstimate(None, reason="no frames yet"), "processed": 0,
+            {"window_estimate": WindowEstimate(None, reason="no frames yet"), "processed": 0,
              "input_ages": (("depth", 8.0), ("nocs", 8.0), ("mask", 8.0)),
              "since_first_input": 9.0},
             Rates(5.0, 0, 0, 0),
@@ -621,14 +624,14 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
         ),  # a slower NOCS network, matching
         (
             {"input_ages": (("depth", 0.01), ("nocs", 0.15), ("mask", 0.15)),
-             "sync_dropped": 900, "rejected": {"sync_queue_full": 700, "sync_unmatched": 200}},
+             "sync_dropped": 900, "dropped": {"sync_queue_full": 700, "sync_unmatched": 200}},
             Rates(5.0, 7, 7, 0, answered=150, inputs=(150, 25, 25)),
             DiagnosticStatus.WARN,
             "focal 600.0 px from few frames: only 7 of the 25 nocs messages in the last 5.0 s "
             "made a frame (700 messages dropped from full queues",
         ),  # the re-run trial: NOCS 265 ms late with queue_size 8; 33 of 125 matched, OK said
         (
-            {"sync_dropped": 40, "rejected": {"sync_unmatched": 40}},
+            {"sync_dropped": 40, "dropped": {"sync_unmatched": 40}},
             Rates(5.0, 0, 0, 0, answered=150),
             DiagnosticStatus.WARN,
             "no matched depth, NOCS and mask set (40 messages dropped as unmatched: the inputs' "
@@ -790,3 +793,61 @@ def test_the_gate_says_why_a_focal_is_held_back(window, words):
 
     why = held_back(window, 0.05, (300.0, 640.0))
     assert words in why if words else why == ""
+
+
+def test_camera_info_output_answers_each_depth_stamp_once_and_the_owed_one_later():
+    """The CameraInfo side without a node: a depth image before any estimate is owed its
+    CameraInfo, which the worker's frame pays once publishable; one of another size is not
+    answered; the latest publication carries the newest frame's objects."""
+    from types import SimpleNamespace as NS
+
+    from fcop_ros.ros.camera_info_output import CameraInfoOutput
+    from fcop_ros.ros.intrinsics import IntrinsicsRefused
+    from fcop_ros.ros.tracker import Publishable
+
+    sent = []
+
+    def build(focal, w, h, header):
+        if header == "refuse":
+            raise IntrinsicsRefused("principal_point_outside", "off the image")
+        return NS(k=[focal, 0, w / 2, 0, focal, h / 2, 0, 0, 1], width=w, height=h)
+
+    out = CameraInfoOutput(sent.append, build)
+    ready = Publishable(600.0, 0.01, 640, 480, WindowEstimate(600.0, 0.01, 300, 4, 4))
+    depth = NS(width=640, height=480, header="h")
+    out.answer_depth(1, depth, lambda: None)  # before any estimate: owed
+    assert sent == [] and out.latest is None
+    out.answer_owed(1, "h", ready)
+    out.answer_owed(1, "h", ready)  # paid once
+    assert len(sent) == 1 and out.latest.stamp_ns == 1 and out.latest.frames == 4
+    out.answer_depth(1, depth, lambda: ready)  # the same stamp again: answered already
+    out.answer_depth(2, NS(width=320, height=240, header="h"), lambda: ready)  # another size
+    out.answer_depth(3, NS(width=640, height=480, header="refuse"), lambda: ready)
+    assert len(sent) == 1 and out.published == 1
+    out.objects(1, ["pose"])
+    assert out.latest.objects == ("pose",)
+    out.answer_depth(4, depth, lambda: ready)
+    out.answer_owed(2, "h", ready)  # older than a stamp answered since: never out of order
+    assert [s.width for s in sent] == [640, 640] and out.latest.objects == ("pose",)
+    out.clear()
+    assert out.latest is None
+    out.answer_depth(4, depth, lambda: ready)  # after a reset each stamp is answered anew
+    assert len(sent) == 3 and out.latest.objects == ()
+
+
+def test_ledger_counts_frames_without_a_focal_since_the_window_was_emptied():
+    from types import SimpleNamespace as NS
+
+    from fcop_ros.ros.frame_outcome import FrameOutcome
+    from fcop_ros.ros.ledger import NodeLedger
+
+    led = NodeLedger(keep=2)
+    led.no_focal("bad_encoding", "rejected: " + "x" * 400)
+    assert len(led.newest_refusal) == 300 and led.dropped == {"bad_encoding": 1}
+    kept = FrameOutcome(Counter(), Counter({"mirrored_nocs": 1}), (), True)
+    for focal in (None, 600.0, 601.0):
+        led.estimated(NS(focal=focal, reason="few votes"), kept, 0.01)
+    assert (led.no_focal_frames, led.since_empty, led.newest_refusal) == (2, 4, "")
+    assert led.warnings == {"mirrored_nocs": 3} and len(led.processing_seconds) == 2
+    led.window_emptied()
+    assert led.since_empty == 0 and led.no_focal_frames == 2

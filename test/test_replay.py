@@ -104,7 +104,7 @@ def test_every_encoding(tmp_path, depth_encoding, nocs_encoding, mask_encoding):
     assert encs == {mb.TOPICS["depth"]: depth_encoding, mb.TOPICS["nocs"]: nocs_encoding,
                     mb.TOPICS["mask"]: mask_encoding}
     s = run(bag, tmp_path / "out")
-    assert s.frames_estimated == 3 and max(s.errors_pct) < 6.0 and not s.rejected
+    assert s.frames_estimated == 3 and max(s.errors_pct) < 6.0 and not s.dropped
 
 
 def test_zoom_reconverges_in_the_csv(tmp_path):

@@ -25,7 +25,8 @@ def test_publishable_carries_the_windows_focal_and_image_size_and_drops_pixel_da
     t = tracker()
     assert t.publishable is None and "no frames yet" in t.held_back()
     step = t.add(estimate(600.0), 0.0)
-    assert step.window is t.current and step.resized_from is None and step.kept_size is None
+    assert step.window_estimate is t.current
+    assert step.resized_from is None and step.kept_size is None
     assert step.ready is t.publishable
     assert (step.ready.focal, step.ready.width, step.ready.height) == (600.0, 640, 480)
     kept = t._history[-1][0]  # what a later re-evaluation sees
@@ -37,7 +38,7 @@ def test_another_size_starts_a_new_window_only_with_a_focal_of_its_own():
     for k in range(3):
         t.add(estimate(600.0), k)
     step = t.add(empty((320, 240)), 3)
-    assert step.kept_size == (640, 480) and step.window is None and len(t) == 3
+    assert step.kept_size == (640, 480) and step.window_estimate is None and len(t) == 3
     assert t.publishable.width == 640  # the old size's focal still answers 640x480 images
     step = t.add(estimate(300.0, size=(320, 240)), 4)
     assert step.resized_from == (640, 480) and len(t) == 1 and t.size == (320, 240)

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-from ..core.window import NO_FRAMES_YET
 from .gate import held_back
 from .intake import SILENT_SECONDS
 
@@ -23,16 +22,16 @@ OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.E
 
 @dataclass(frozen=True)
 class DiagnosticsInput:
-    """One reading of the node. ``window``: the window's current WindowEstimate; ``publishable``:
-    whether its focal is within max_uncertainty (CameraInfo goes out); ``busy_for`` / ``age``:
-    seconds the estimator has been busy with one frame / since it finished the last (None: idle /
-    never); ``processing_ms``: recent per-frame estimation times; ``kernels``: what runs the
-    estimator's kernels (numba or the numpy fallback); ``warming_up``: the estimator thread is
-    still compiling or loading them; ``focal_range``: (focal_min, focal_max), which bounds every
-    published focal."""
+    """One reading of the node. ``window_estimate``: the window's current WindowEstimate;
+    ``publishable``: whether its focal is within max_uncertainty (CameraInfo goes out);
+    ``busy_for`` / ``age``: seconds the estimator has been busy with one frame / since it
+    finished the last (None: idle / never); ``processing_ms``: recent per-frame estimation
+    times; ``kernels``: what runs the estimator's kernels (numba or the numpy fallback);
+    ``warming_up``: the estimator thread is still compiling or loading them; ``focal_range``:
+    (focal_min, focal_max), which bounds every published focal."""
 
     now: float
-    window: object
+    window_estimate: object
     publishable: bool
     window_fill: str
     max_uncertainty: float
@@ -45,7 +44,7 @@ class DiagnosticsInput:
     busy_for: float | None = None
     age: float | None = None
     processing_ms: tuple = ()
-    rejected: dict = field(default_factory=dict)
+    dropped: dict = field(default_factory=dict)
     warnings: dict = field(default_factory=dict)
     kernels: str = ""
     warming_up: bool = False
@@ -53,6 +52,8 @@ class DiagnosticsInput:
     # Why the newest frame the estimator took gave no focal: its input refused ("rejected: ...")
     # or no evidence in it; "" if it gave one.
     last_reason: str = ""
+    # Frames the estimator finished since the window was last emptied (start, reset).
+    since_empty: int = 0
     # Why no CameraInfo can be built for the images the publishable focal belongs to (a
     # camera_info_in of another size, a principal point off the image); "" if it can.
     no_camera_info: str = ""
@@ -126,7 +127,7 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     no focal (the
     focal then comes from earlier frames, which a bad input can leave for a window's length);
     else OK."""
-    win = d.window
+    win = d.window_estimate
     std = getattr(win, "std_rel", None)
     silent = _silent(d)
     lost = _slowest_lost(d, rates)
@@ -142,9 +143,9 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
                    "on a machine compiles them, up to a minute)")
     elif win.focal is None:
         why = win.reason
-        if why == NO_FRAMES_YET and d.processed:
+        if win.frames == 0 and d.since_empty:
             # Refused or failed frames never reach the window, which still says it has none.
-            why = f"none of the {d.processed} frames estimated reached the window"
+            why = f"none of the {d.since_empty} frames estimated reached the window"
         level, message = WARN, f"no focal estimate yet: {why}"
         if d.last_reason:
             message += f"; the newest frame: {d.last_reason}"
@@ -217,7 +218,7 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
     }
     values.update({f"{name}_age_s": "" if age is None else f"{age:.2f}"
                    for name, age in d.input_ages})
-    values.update({f"rejected_{k}": str(v) for k, v in sorted(d.rejected.items())})
+    values.update({f"dropped_{k}": str(v) for k, v in sorted(d.dropped.items())})
     values.update({f"warning_{k}": str(v) for k, v in sorted(d.warnings.items())})
     return level, message, values
 
@@ -254,14 +255,14 @@ def _slowest_lost(d: DiagnosticsInput, rates: Rates):
 
 def _sync_hint(d: DiagnosticsInput, silent: list) -> str:
     """Why depth, NOCS and mask do not match, and the parameter that answers it: an input silent
-    now (``silent``: :func:`_silent`'s), else what the synchroniser's drops (counted as rejected
+    now (``silent``: :func:`_silent`'s), else what the synchroniser's drops (counted as dropped
     'sync_<reason>') say."""
     if silent and len(silent) < len(d.input_ages):
         return " and ".join(f"no {name} message for {age:.1f} s" for name, age in silent) + (
             " (silent, or " + ("its topic" if len(silent) == 1 else "their topics")
             + " remapped elsewhere?)")
-    unmatched = d.rejected.get("sync_unmatched", 0)
-    full = d.rejected.get("sync_queue_full", 0)
+    unmatched = d.dropped.get("sync_unmatched", 0)
+    full = d.dropped.get("sync_queue_full", 0)
     if unmatched >= full and unmatched:
         return (f"{unmatched} messages dropped as unmatched: the inputs' stamps differ (exact "
                 "sync needs equal stamps; sync_mode approximate matches within sync_slop)")

@@ -1,7 +1,7 @@
 """What one estimated frame did, in the node's words: plain Python, no rclpy.
 
 After the estimator thread has added a frame's FocalEstimate to the tracker, :func:`frame_outcome`
-says what to count (dropped frames under the names of the node's ``rejected`` counter, accepted
+says what to count (dropped frames under the names of the node's ``dropped`` counter, accepted
 input that deserved a word under ``warnings``) and what to log. The node only applies that, as it
 applies :class:`.intake.SyncStep` on the input side.
 """
@@ -49,7 +49,7 @@ def frame_outcome(est, step) -> FrameOutcome:
         ow, oh = step.resized_from
         log.append(("event", "resized", f"fcop_node: image size changed from {ow}x{oh} to "
                                         f"{w}x{h}: new focal window"))
-    win = step.window
+    win = step.window_estimate
     if win.changed:
         at = "no focal yet" if win.focal is None else f"{win.focal:.1f} px"
         log.append(("event", "zoom", "fcop_node: focal length changed (zoom?): " + (

@@ -3,7 +3,7 @@
 The node's image callback hands each message to :meth:`Intake.add`, which adds it to the
 :class:`~fcop_ros.ros.sync.StampSynchronizer` and reports the frames it completed, the messages
 that passed the stamp check, whether time jumped back, the drops to count (under the names the
-node's ``rejected`` counter and /diagnostics use) and the log lines that explain them. The node
+node's ``dropped`` counter and /diagnostics use) and the log lines that explain them. The node
 only applies that: it resets on a jump, hands the frames on, counts and logs (throttled).
 
 Drops of a faster input while frames keep matching are how inputs of different rates meet

@@ -11,13 +11,12 @@ publishing never waits for the estimator, and the estimator never works on a bac
 
 from __future__ import annotations
 
-import dataclasses
 import re
 import sys
 import threading
 import time
 import traceback
-from collections import Counter, deque
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,14 +38,15 @@ from msg_adapters import marker_array, object_poses, pose_array, stamp_ns
 
 from ..core import compiled, estimate_poses
 from .allocator import limit_allocator_arenas
-from .answers import DepthAnswers
 from .calibration import calibration_path, save_calibration
+from .camera_info_output import CameraInfoOutput, LatestEstimate
 from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
 from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
 from .frame_estimate import estimate_frame
 from .frame_outcome import frame_outcome
 from .intake import Intake
 from .intrinsics import IntrinsicsRefused, Refused, camera_info_with, intrinsics
+from .ledger import NodeLedger
 from .params import (
     ESTIMATOR_PARAMETERS,
     GATE_PARAMETERS,
@@ -77,42 +77,21 @@ RCLError = _rclpy.RCLError
 
 
 @dataclass(frozen=True)
-class LatestEstimate:
-    """What the node published last: the CameraInfo of depth stamp ``stamp_ns`` (focal, principal
-    point, image size) and the window estimate behind it (``std_rel``, ``support`` votes,
-    ``frames`` in the window); ``objects``: the ObjectPoses of the newest processed frame, of this
-    stamp once that frame is processed."""
-
-    stamp_ns: int
-    focal: float
-    cx: float
-    cy: float
-    width: int
-    height: int
-    std_rel: float | None
-    support: int
-    frames: int
-    objects: tuple = ()
-
-
-@dataclass(frozen=True)
 class NodeCounts:
     """The node's counters at one moment: input messages ``received``, frames ``matched`` by the
-    synchroniser, ``processed`` by the estimator, ``published`` (poses and markers), ``skipped``
-    in the hand-off for newer ones, CameraInfo messages, and dropped input by reason."""
+    synchroniser, ``processed`` by the estimator, ``frames_published`` (their window estimate was
+    publishable: poses and markers), ``skipped`` in the hand-off for newer ones, CameraInfo
+    messages, input and frames ``dropped`` and ``warnings`` (accepted input that deserved a word),
+    by reason (see :class:`.ledger.NodeLedger`)."""
 
     received: int
     matched: int
     processed: int
-    published: int
+    frames_published: int
     skipped: int
     camera_info_published: int
-    rejected: dict
-
-
-def _clipped(reason: str) -> str:
-    """A reason for diagnostics: at most 300 characters."""
-    return reason if len(reason) <= 300 else reason[:297] + "..."
+    dropped: Counter
+    warnings: Counter
 
 
 class FcopNode(Node):
@@ -131,24 +110,12 @@ class FcopNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._now = time.monotonic  # the clock of rates and ages; replaceable in tests
-        self.rejected: Counter = Counter()  # dropped input, by reason
-        self.warnings: Counter = Counter()  # accepted input that deserved a word, by reason
-        self._latest: LatestEstimate | None = None  # the last CameraInfo publication (see latest)
-        self.published = 0  # frames whose estimate was published (poses and markers)
-        self.camera_info_published = 0
-        # Matched frames replaced in the hand-off before the estimator took them.
-        self.handoff_dropped = 0
+        self.ledger = NodeLedger()  # counters and reasons, under self._lock
         self.last_estimate = None  # the FocalEstimate of the newest processed frame
-        # Why the newest frame the estimator took gave no focal ("" if it gave one), and how
-        # many frames it took gave none, input it refused included: for diagnostics.
-        self._newest_refusal = ""
-        self._no_focal_frames = 0
-        self._proc_times: deque = deque(maxlen=200)
         # Frame and estimator rates over 5 s, for diagnostics (the first reading: since start).
         self._rates = RateWindow(5.0, start=self._now())
         self._throttle = LogThrottle(self.get_logger())
         self._lock = threading.Lock()
-        self._pub_lock = threading.Lock()  # CameraInfo publication from the two threads
         # The one-slot hand-off to the estimator thread; its clear() on every reset discards the
         # frames taken before it. Started once the node is complete.
         self.worker = LatestSlotWorker(
@@ -160,9 +127,9 @@ class FcopNode(Node):
         )
         self._warming_up = True  # until the worker has its kernels (see _warm_up_kernels)
         self.warm_up_seconds = 0.0  # what preparing them took (replay's throughput leaves it out)
-        self._last_objects: list = []
-        self._answers = DepthAnswers()  # under self._pub_lock
         self._cam_in: CameraInfo | None = None
+        # The CameraInfo side: depth stamps answered, the latest publication, the newest poses.
+        self.info_out = CameraInfoOutput(self._send_camera_info, self._camera_info)
         self._warned_distortion = False
         self._health_said = None  # the /diagnostics problem last logged (level, wording)
         self._traceback_said = False
@@ -335,7 +302,7 @@ class FcopNode(Node):
         with self._lock:
             self.p = new
             if changed & SYNC_PARAMETERS:
-                self.rejected.update(self.intake.configure(*sync_settings(new)))
+                self.ledger.dropped.update(self.intake.configure(*sync_settings(new)))
             if changed & ESTIMATOR_PARAMETERS:
                 self.estimator_options = estimator_options(new)
             if changed & (WINDOW_PARAMETERS | GATE_PARAMETERS):
@@ -365,7 +332,7 @@ class FcopNode(Node):
 
     def _reset_locked(self) -> None:
         self.tracker.reset()
-        self._newest_refusal = ""
+        self.ledger.window_emptied()
         self.worker.clear()
 
     def _camera_info(self, focal: float, w: int, h: int, header):
@@ -398,16 +365,15 @@ class FcopNode(Node):
             step = self.intake.add(index, stamp_ns(msg), msg, self._now())
             if step.jumped:  # before the new frames reach the worker
                 self._reset_locked()
-            self.rejected.update(step.dropped)
+            self.ledger.dropped.update(step.dropped)
             self._hand_off(step.sets)
         if step.jumped:
-            with self._pub_lock:
-                self._answers.forget()
+            self.info_out.forget()
         for _, msgs in step.sets:
             self._check_frame_ids(msgs)
         for i, stamp, m in step.accepted:
             if i == 0:
-                self._answer_depth(stamp, m)
+                self.info_out.answer_depth(stamp, m, lambda: self.tracker.publishable)
         self._say(step.log)
 
     def _say(self, log) -> None:
@@ -424,8 +390,8 @@ class FcopNode(Node):
         for k, item in enumerate(sets):
             if not self.worker.put(item):
                 continue
-            self.handoff_dropped += 1
-            self.rejected["estimator_busy"] += 1
+            self.ledger.skipped += 1
+            self.ledger.dropped["estimator_busy"] += 1
             if k == 0:
                 self._throttle.warn(
                     "estimator_busy",
@@ -448,7 +414,7 @@ class FcopNode(Node):
         if not reasons:
             return
         with self._lock:
-            self.warnings.update(reasons)
+            self.ledger.warnings.update(reasons)
         self._throttle.warn(
             reasons[0],
             "fcop_node: the inputs of one frame name different or empty frame_ids ("
@@ -456,40 +422,10 @@ class FcopNode(Node):
             + "): the outputs use the depth image's",
         )
 
-    def _answer_depth(self, stamp: int, msg: Image) -> None:
-        """Publish the CameraInfo of one depth image with the current estimate, if there is one."""
-        with self._pub_lock:
-            if self._answers.answered(stamp):
-                return
-            est = self.tracker.publishable
-            if est is None or (msg.width, msg.height) != (est.width, est.height):
-                self._answers.unanswered(stamp)
-                return
-            try:
-                info = self._camera_info(est.focal, est.width, est.height, msg.header)
-            except IntrinsicsRefused:
-                self._answers.unanswered(stamp)
-                return
-            self._publish_info(stamp, info, est.window, self._last_objects)
-
-    def _publish_info(self, stamp: int, info: CameraInfo, win, objects) -> None:
-        """Under self._pub_lock."""
+    def _send_camera_info(self, info: CameraInfo) -> None:
+        """One CameraInfo out, to camera_info and ~/latest_camera_info (under info_out's lock)."""
         self.pub_info.publish(info)
         self.pub_latest.publish(info)
-        self.camera_info_published += 1
-        self._answers.answer(stamp)
-        self._latest = LatestEstimate(
-            stamp,
-            float(info.k[0]),
-            float(info.k[2]),
-            float(info.k[5]),
-            int(info.width),
-            int(info.height),
-            getattr(win, "std_rel", None),
-            int(win.support),
-            int(win.frames),
-            tuple(objects),
-        )
 
     # ----- worker thread: conversions, estimation, poses
     def _estimate_item(self, item, generation: int) -> None:
@@ -533,9 +469,7 @@ class FcopNode(Node):
             return
         why = f"failed: {type(exc).__name__}: {exc}"
         with self._lock:  # a frame without a focal, as one the estimator refused
-            self.rejected["exception"] += 1
-            self._no_focal_frames += 1
-            self._newest_refusal = _clipped(why)
+            self.ledger.no_focal("exception", why)
         self._throttle.warn("exception", f"fcop_node: frame {item[0]} {why}")
         if not self._traceback_said:  # once: what a bug report needs
             self._traceback_said = True
@@ -546,15 +480,13 @@ class FcopNode(Node):
     def _reject(self, reason: str, n: int = 1) -> None:
         """Count dropped input; the worker and the executor thread both do, diagnostics reads."""
         with self._lock:
-            self.rejected[reason] += n
+            self.ledger.dropped[reason] += n
 
     def _refuse_frame(self, reason: str, why: str) -> bool:
         """Count a frame the estimator took but could not use (``reason``), log ``why`` with a
         throttle, and keep it as the newest frame's reason; returns False."""
         with self._lock:
-            self.rejected[reason] += 1
-            self._no_focal_frames += 1
-            self._newest_refusal = _clipped(f"rejected: {why}")
+            self.ledger.no_focal(reason, f"rejected: {why}")
         self._throttle.warn(reason, f"fcop_node: rejected frame: {why}")
         return False
 
@@ -577,13 +509,12 @@ class FcopNode(Node):
     def processing_seconds(self) -> tuple:
         """Wall time of the last (up to 200) processed frames: conversion, estimate, window."""
         with self._lock:
-            return tuple(self._proc_times)
+            return tuple(self.ledger.processing_seconds)
 
     @property
     def latest(self) -> LatestEstimate | None:
         """The last CameraInfo publication and the estimate behind it (None before the first)."""
-        with self._pub_lock:
-            return self._latest
+        return self.info_out.latest
 
     @property
     def window_estimate(self):
@@ -599,10 +530,11 @@ class FcopNode(Node):
                 self.received,
                 self.sync.stats.matched,
                 self.worker.processed,
-                self.published,
-                self.handoff_dropped,
-                self.camera_info_published,
-                dict(self.rejected),
+                self.ledger.frames_published,
+                self.ledger.skipped,
+                self.info_out.published,
+                Counter(self.ledger.dropped),
+                Counter(self.ledger.warnings),
             )
 
     def process(self, stamp: int, msgs, generation: int | None = None) -> bool:
@@ -617,31 +549,19 @@ class FcopNode(Node):
             est = estimate_frame(msgs, p, camera_info_in, self.estimator_options, self._rng)
         except Refused as exc:
             return self._refuse_frame(exc.reason, str(exc))
-        w, h = est.image_size
         with self._lock:
             if generation is not None and generation != self.worker.generation:
                 return False  # taken before a reset
             step = self.tracker.add(est, stamp * 1e-9)
             self.last_estimate = est
-            self._newest_refusal = "" if est.focal is not None else _clipped(est.reason)
-            self._no_focal_frames += est.focal is None
-            self._proc_times.append(time.perf_counter() - t0)
             said = frame_outcome(est, step)
-            self.rejected.update(said.dropped)
-            self.warnings.update(said.warnings)
+            self.ledger.estimated(est, said, time.perf_counter() - t0)
         self._say(said.log)
-        win, ready = step.window, step.ready
+        ready = step.ready
         if not said.kept or ready is None:
             return False
         # This frame's depth image arrived before there was an estimate: answer it now.
-        with self._pub_lock:
-            if self._answers.owed(stamp):
-                try:
-                    self._publish_info(
-                        stamp, self._camera_info(ready.focal, w, h, depth_msg.header), win, []
-                    )
-                except IntrinsicsRefused:
-                    pass
+        self.info_out.answer_owed(stamp, depth_msg.header, ready)
         objects = []
         if p["publish_poses"] or p["publish_markers"]:
             # Poses at the window's focal length: steadier than the frame's own.
@@ -652,12 +572,9 @@ class FcopNode(Node):
                 self.pub_poses.publish(pose_array(objects, depth_msg.header, poses))
             if p["publish_markers"]:
                 self.pub_markers.publish(marker_array(objects, depth_msg.header, poses=poses))
-        with self._pub_lock:
-            self._last_objects = objects
-            if self._latest is not None and self._latest.stamp_ns == stamp:
-                self._latest = dataclasses.replace(self._latest, objects=tuple(objects))
+        self.info_out.objects(stamp, objects)
         with self._lock:
-            self.published += 1
+            self.ledger.frames_published += 1
         return True
 
     # ----- services
@@ -669,12 +586,11 @@ class FcopNode(Node):
             self._reset_locked()
             self.intake.reset()
             self.last_estimate = None
-        with self._pub_lock:  # a new publisher: late joiners get nothing from before the reset
+        with self.info_out.lock:  # a new publisher: late joiners get nothing from before it
             self.destroy_publisher(self.pub_latest)
             self.pub_latest = self._latched_publisher()
-            self._latest, self._last_objects = None, []
             # In the same step: a frame taken before the reset finds its stamp gone.
-            self._answers.forget()
+            self.info_out.clear()
         response.success = True
         response.message = ("focal window, synchroniser, hand-off, latest_camera_info and "
                             "the latest estimate cleared")
@@ -743,7 +659,7 @@ class FcopNode(Node):
                     no_camera_info = str(exc)
             reading = DiagnosticsInput(
                 now=now,
-                window=self.window.current,
+                window_estimate=self.window.current,
                 publishable=ready is not None,
                 window_fill=f"{len(self.window)}/{self.p['window_frames']}",
                 max_uncertainty=self.p["max_uncertainty"],
@@ -751,17 +667,18 @@ class FcopNode(Node):
                 max_estimate_age=self.p["max_estimate_age"],
                 matched=self.sync.stats.matched,
                 processed=work.processed,
-                skipped=self.handoff_dropped,
+                skipped=self.ledger.skipped,
                 sync_dropped=self.sync.stats.dropped_total,
-                camera_info_published=self.camera_info_published,
+                camera_info_published=self.info_out.published,
                 busy_for=None if work.busy_since is None else now - work.busy_since,
                 age=None if work.last_done is None else now - work.last_done,
-                processing_ms=tuple(t * 1000 for t in self._proc_times),
-                rejected=dict(self.rejected),
-                warnings=dict(self.warnings),
+                processing_ms=tuple(t * 1000 for t in self.ledger.processing_seconds),
+                dropped=dict(self.ledger.dropped),
+                warnings=dict(self.ledger.warnings),
                 kernels=compiled.describe(),
                 warming_up=self._warming_up,
-                last_reason=self._newest_refusal,
+                last_reason=self.ledger.newest_refusal,
+                since_empty=self.ledger.since_empty,
                 no_camera_info=no_camera_info,
                 input_ages=self.intake.ages(now),
                 since_first_input=self.intake.since_first(now),
@@ -769,7 +686,7 @@ class FcopNode(Node):
             )
             inputs = tuple(self.intake.received)
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped,
-                                reading.camera_info_published, self._no_focal_frames, inputs)
+                                reading.camera_info_published, self.ledger.no_focal_frames, inputs)
         return diagnostic_status(
             f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading, rates
         )

@@ -22,7 +22,7 @@ class Publishable:
     std_rel: float
     width: int
     height: int
-    window: object  # the WindowEstimate
+    window_estimate: object
 
 
 @dataclass(frozen=True)
@@ -32,7 +32,7 @@ class TrackStep:
     (``resized_from``), or the size it kept when a frame of another size came without a focal
     of its own (``kept_size``: the frame was dropped)."""
 
-    window: object | None
+    window_estimate: object | None
     ready: Publishable | None
     resized_from: tuple | None = None
     kept_size: tuple | None = None

@@ -227,7 +227,7 @@ def _nothing_published(summary: ReplaySummary) -> str:
     that lets them through), else topics that never matched or gave no evidence."""
     if not summary.held_back:
         return ("no frame was estimated: the three topics never matched or gave no evidence "
-                "(see 'rejected inputs')")
+                "(see 'dropped input')")
     if "focal_range" in summary.held_reason:
         hint = "-p focal_min:=... / -p focal_max:=... if the camera's focal lies outside"
     else:

@@ -63,7 +63,7 @@ class ReplaySummary:
     warm_up_seconds: float = 0.0
     out_dir: str = ""
     damaged: str = ""
-    rejected: dict = field(default_factory=dict)
+    dropped: dict = field(default_factory=dict)
     csv_rows: int = 0
     held_back: int = 0  # frames estimated whose focal the publish gate held back
     held_reason: str = ""  # the gate's word on the last of them
@@ -77,7 +77,7 @@ class ReplaySummary:
             f"frames read       {self.frames_read}",
             f"frames answered   {self.frames_estimated} with a CameraInfo",
         ]
-        if 0 < self.frames_estimated < self.frames_read and not self.rejected:
+        if 0 < self.frames_estimated < self.frames_read and not self.dropped:
             lines[-1] += (f"; {self.frames_read - self.frames_estimated} without: the window "
                           "had too few frames yet, or its std_rel was above max_uncertainty or "
                           "its focal outside focal_min..focal_max")
@@ -91,10 +91,10 @@ class ReplaySummary:
         warm = (f"; the kernels' preparation, {self.warm_up_seconds:.1f} s, left out"
                 if self.warm_up_seconds >= 0.05 else "")
         lines.append(f"throughput        {self.fps:.1f} frames/s ({self.seconds:.1f} s{warm})")
-        if self.rejected:
+        if self.dropped:
             lines.append(
-                "rejected inputs   "
-                + ", ".join(f"{k}: {v}" for k, v in sorted(self.rejected.items()))
+                "dropped input     "
+                + ", ".join(f"{k}: {v}" for k, v in sorted(self.dropped.items()))
             )
         if self.damaged:
             lines.append(

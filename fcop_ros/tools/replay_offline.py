@@ -245,7 +245,7 @@ def replay(
                 raise ReplayError(
                     "the node did not answer in time (is the machine overloaded?) "
                     f"[received {n.received}/{sent}, matched {n.matched}, "
-                    f"processed {n.processed}, published {n.published}, "
+                    f"processed {n.processed}, published {n.frames_published}, "
                     f"outputs {[len(v) for v in got.values()]}]"
                 )
 
@@ -285,7 +285,7 @@ def replay(
                 # bag's last), poses and markers per estimated frame.
                 n = node.counts
                 sent_out = {"camera_info": n.camera_info_published}
-                return all(consumed[k] + len(got[k]) >= sent_out.get(k, n.published)
+                return all(consumed[k] + len(got[k]) >= sent_out.get(k, n.frames_published)
                            for k in wanted)
 
             spin_until(delivered)
@@ -354,7 +354,7 @@ def replay(
         if state["bar"] is not None:
             step(state["bar"].close)
         if state["node"] is not None:
-            summary.rejected = state["node"].counts.rejected
+            summary.dropped = state["node"].counts.dropped
             step(state["node"].destroy_node)
         if state["feeder"] is not None:
             step(state["feeder"].destroy_node)
