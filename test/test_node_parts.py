@@ -851,3 +851,17 @@ def test_ledger_counts_frames_without_a_focal_since_the_window_was_emptied():
     assert led.warnings == {"mirrored_nocs": 3} and len(led.processing_seconds) == 2
     led.window_emptied()
     assert led.since_empty == 0 and led.no_focal_frames == 2
+
+
+def test_health_news_says_each_problem_once_and_its_end():
+    from fcop_ros.ros.diagnostics import HealthNews
+
+    news, WARN, ERROR = HealthNews(), DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+    assert news(WARN, "no focal estimate yet: no frames yet") is None  # the start: no news
+    said = news(WARN, "no focal estimate yet: no frames yet; no depth message for 3.0 s")
+    assert said == (WARN, "no focal estimate yet: no frames yet; no depth message for 3.0 s")
+    assert news(WARN, "no focal estimate yet: no frames yet; no depth message for 9.5 s") is None
+    assert news(ERROR, "estimator stalled: busy with one frame for 4.0 s")[0] == ERROR
+    assert news(DiagnosticStatus.OK, "focal 600.0 px") == (
+        DiagnosticStatus.OK, "healthy again: focal 600.0 px")
+    assert news(DiagnosticStatus.OK, "focal 600.0 px") is None

@@ -8,6 +8,7 @@ level, message and key-values, :func:`diagnostic_status` wraps them in the messa
 
 from __future__ import annotations
 
+import re
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -282,3 +283,29 @@ def diagnostic_status(
     st = DiagnosticStatus(name=name, hardware_id=hardware_id, level=level, message=message)
     st.values = [KeyValue(key=k, value=v) for k, v in values.items()]
     return st
+
+
+class HealthNews:
+    """What of /diagnostics the console should hear, for whoever watches only it (the camera
+    stopping said nothing there): each problem once when it begins (a new level or a new cause;
+    its numbers may change), and that it is over once the status is OK again. The start's plain
+    'no focal estimate yet' (no frames, kernels, too few frames) is no news; with a cause after
+    it (no input, nothing matched) it is."""
+
+    def __init__(self):
+        self._said = None  # the problem last said: (level, wording without its numbers)
+
+    def __call__(self, level: bytes, message: str) -> tuple | None:
+        """(level, line) to log for this status, or None."""
+        if level == OK:
+            if self._said is None:
+                return None
+            self._said = None
+            return OK, f"healthy again: {message}"
+        if message.startswith("no focal estimate yet") and ";" not in message:
+            return None
+        cause = (level, re.sub(r"\d+(\.\d+)?", "#", message))
+        if cause == self._said:
+            return None
+        self._said = cause
+        return level, message

@@ -11,7 +11,6 @@ publishing never waits for the estimator, and the estimator never works on a bac
 
 from __future__ import annotations
 
-import re
 import sys
 import threading
 import time
@@ -28,7 +27,6 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos_overriding_options import InvalidQosOverridesError, QoSOverridingOptions
 from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
@@ -41,12 +39,13 @@ from .allocator import limit_allocator_arenas
 from .calibration import calibration_path, save_calibration
 from .camera_info_output import CameraInfoOutput, LatestEstimate
 from .command_line import USAGE, params_file_problem, rcl_params_error, wants_help
-from .diagnostics import DiagnosticsInput, RateWindow, diagnostic_status
+from .diagnostics import DiagnosticsInput, HealthNews, RateWindow, diagnostic_status
 from .frame_estimate import estimate_frame
 from .frame_outcome import frame_outcome
 from .intake import Intake
 from .intrinsics import IntrinsicsRefused, Refused, camera_info_with, intrinsics
 from .ledger import NodeLedger
+from . import node_parameters
 from .params import (
     ESTIMATOR_PARAMETERS,
     GATE_PARAMETERS,
@@ -54,19 +53,15 @@ from .params import (
     SYNC_PARAMETERS,
     WINDOW_PARAMETERS,
     ParameterError,
-    allowed,
-    as_declared,
     check_combination,
     check_words,
-    descriptor,
-    did_you_mean,
     estimator_options,
     gate_settings,
     not_allowed,
     sync_settings,
     window_options,
 )
-from .qos import input_qos, latched_qos, output_qos, refused_override, unknown_override_hint
+from .qos import input_qos, latched_qos, output_qos, refused_override
 from .sync import StampSynchronizer
 from .throttle import LogThrottle
 from .topics import CAMERA_INFO_IN, INPUTS, OUTPUTS
@@ -101,7 +96,7 @@ class FcopNode(Node):
         self.worker = None  # destroy_node works even when the parameters are refused
         super().__init__(node_name, **kwargs)
         try:
-            self._declare_parameters()
+            self.p = node_parameters.declare(self)
         except ParameterError:
             Node.destroy_node(self)
             raise
@@ -131,7 +126,7 @@ class FcopNode(Node):
         # The CameraInfo side: depth stamps answered, the latest publication, the newest poses.
         self.info_out = CameraInfoOutput(self._send_camera_info, self._camera_info)
         self._warned_distortion = False
-        self._health_said = None  # the /diagnostics problem last logged (level, wording)
+        self._health_news = HealthNews()  # what of /diagnostics the log says
         self._traceback_said = False
         self._rng = np.random.default_rng(None if self.p["seed"] < 0 else int(self.p["seed"]))
         self.intake = Intake(self._new_sync(), INPUTS)
@@ -182,7 +177,7 @@ class FcopNode(Node):
         """ParameterError for a QoS override of this topic's ``kind`` ('subscription' or
         'publisher') that rclpy would refuse with a traceback."""
         prefix = f"qos_overrides.{self.resolve_topic_name(topic)}.{kind}."
-        problem = refused_override(getattr(self, "_parameter_overrides", {}), prefix)
+        problem = refused_override(node_parameters.given(self), prefix)
         if problem:
             raise ParameterError(problem)
 
@@ -232,7 +227,7 @@ class FcopNode(Node):
     def _warn_unknown_overrides(self) -> None:
         """Name each parameter given (``-p``, a params file) that the node does not have: rclpy
         ignores it without a word, and a misspelt name would leave its default in force."""
-        for name in sorted(getattr(self, "_parameter_overrides", {})):
+        for name in sorted(node_parameters.given(self)):
             if not self.has_parameter(name):
                 self.get_logger().warning(
                     f"fcop_node: parameter {name} is not one of this node's; ignored"
@@ -240,49 +235,21 @@ class FcopNode(Node):
                 )
 
     def _unknown_parameter_hint(self, name: str) -> str:
-        """' (did you mean ...?)' for a name the node does not have, or ''."""
         topics = sorted(s.topic_name for s in self._subs + [self.sub_info_in]) + [
             p.topic_name for p in (self.pub_info, self.pub_poses, self.pub_markers)]
-        return unknown_override_hint(name, topics) or did_you_mean(name)
-
-    def _declare_parameters(self) -> None:
-        """Declare every parameter with its descriptor (rclpy refuses a wrong type or range, turned
-        into one ParameterError line), then check what descriptors cannot say."""
-        overrides = getattr(self, "_parameter_overrides", {})
-        for name in PARAMETERS:
-            given = overrides.get(name)
-            value = None if given is None else as_declared(name, given.value)
-            if given is not None and value is not given.value:  # focal_min:=300 means 300.0
-                overrides[name] = Parameter(name, value=value)
-            try:
-                declared = self.declare_parameter(name, PARAMETERS[name].default, descriptor(name))
-            except ParameterException:
-                value = overrides[name].value if name in overrides else "?"
-                raise ParameterError(not_allowed(name, value, allowed(name, value))) from None
-            if declared.type_ == Parameter.Type.NOT_SET:  # rcl's reading of '[]' or a blank
-                raise ParameterError(f"parameter {name} has no value: {allowed(name)}")
-        self.p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        for name, value in self.p.items():
-            check_words(name, value)
-        moved = {k for k, v in self.p.items() if v != PARAMETERS[k].default}
-        problem = check_combination(self.p, changed=moved)
-        if problem:
-            raise ParameterError(problem)
+        return node_parameters.unknown_hint(name, topics)
 
     def _before_set(self, params) -> list:
         """Before rclpy checks a set request: name a parameter the node does not have (rclpy
         refuses it with "Invalid access to undeclared parameter(s): []", naming none), and take
-        an integer set for a double parameter as that double (``ros2 param set ... focal_min
-        300`` sends an integer), as at start-up; rclpy would refuse it by type."""
+        an integer set for a double parameter as that double, as at start-up."""
         for prm in params:
             if not self.has_parameter(prm.name):
                 self._throttle.warn(
                     "unknown_parameter",
                     f"fcop_node: cannot set parameter {prm.name}: not one of this node's"
                     f"{self._unknown_parameter_hint(prm.name)}")
-        return [Parameter(prm.name, value=as_declared(prm.name, prm.value))
-                if prm.name in PARAMETERS and prm.type_ == Parameter.Type.INTEGER else prm
-                for prm in params]
+        return node_parameters.as_requested(params)
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         """rclpy has applied the descriptors (type, range, read-only); refuse what they cannot
@@ -707,27 +674,17 @@ class FcopNode(Node):
         return msg
 
     def _log_health(self, status: DiagnosticStatus) -> None:
-        """Say /diagnostics' problems in the log too, for whoever watches only the console (the
-        camera stopping said nothing there): each problem once when it begins (a new level or
-        a new cause; its numbers may change), and that it is over once the status is OK again.
-        The start's plain 'no focal estimate yet' (no frames, kernels, too few frames) is no
-        news; with a cause after it (no input, nothing matched) it is."""
-        level, message = status.level, status.message
+        """Say /diagnostics' news in the log too (see :class:`.diagnostics.HealthNews`)."""
+        news = self._health_news(status.level, status.message)
+        if news is None:
+            return
+        level, text = news
         if level == DiagnosticStatus.OK:
-            if self._health_said is not None:
-                self._health_said = None
-                self.get_logger().info(f"fcop_node: healthy again: {message}")
-            return
-        if message.startswith("no focal estimate yet") and ";" not in message:
-            return
-        cause = (level, re.sub(r"\d+(\.\d+)?", "#", message))
-        if cause == self._health_said:
-            return
-        self._health_said = cause
-        if level == DiagnosticStatus.ERROR:
-            self.get_logger().error(f"fcop_node: {message}")
+            self.get_logger().info(f"fcop_node: {text}")
+        elif level == DiagnosticStatus.ERROR:
+            self.get_logger().error(f"fcop_node: {text}")
         else:
-            self._throttle.warn("health", f"fcop_node: {message}")
+            self._throttle.warn("health", f"fcop_node: {text}")
 
     def destroy_node(self):
         if self.worker is not None:
