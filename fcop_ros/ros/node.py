@@ -202,9 +202,13 @@ class FcopNode(Node):
             qos_overriding_options=qos_in,
         )
         qos_out = QoSOverridingOptions.with_default_policies()
-        self.pub_info, self.pub_poses, self.pub_markers = (
-            self.create_publisher(cls, topic, output_qos(), qos_overriding_options=qos_out)
-            for topic, cls in OUTPUTS.items())
+        # The outputs by their topic's relative name (as OUTPUTS writes them), for the tools.
+        self.outputs = {
+            topic: self.create_publisher(cls, topic, output_qos(), qos_overriding_options=qos_out)
+            for topic, cls in OUTPUTS.items()}
+        self.pub_info = self.outputs["camera_info"]
+        self.pub_poses = self.outputs["object_poses"]
+        self.pub_markers = self.outputs["object_markers"]
         self.pub_latest = self._latched_publisher()
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
 
@@ -236,7 +240,7 @@ class FcopNode(Node):
 
     def _unknown_parameter_hint(self, name: str) -> str:
         topics = sorted(s.topic_name for s in self._subs + [self.sub_info_in]) + [
-            p.topic_name for p in (self.pub_info, self.pub_poses, self.pub_markers)]
+            p.topic_name for p in self.outputs.values()]
         return node_parameters.unknown_hint(name, topics)
 
     def _before_set(self, params) -> list:

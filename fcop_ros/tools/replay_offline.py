@@ -219,8 +219,7 @@ def replay(
         pubs = {
             t: feeder.create_publisher(Image, t, qos_profile_sensor_data) for t in inputs.values()
         }
-        outputs = dict(zip(OUTPUTS, (p.topic_name for p in
-                                     (node.pub_info, node.pub_poses, node.pub_markers))))
+        outputs = {k: pub.topic_name for k, pub in node.outputs.items()}
         types = {k: type_name(cls) for k, cls in OUTPUTS.items()}
         got: dict[str, list] = {k: [] for k in outputs}
         consumed = {k: 0 for k in outputs}
