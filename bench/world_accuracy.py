@@ -1,7 +1,7 @@
 """Accuracy, bias and honesty of the uncertainty on the randomised world, held-out beside tuned.
 
     python bench/world_accuracy.py [--frames 60] [--sequences 40] [--zoom-sequences 8]
-        [--heldout | --heldout2 | --heldout3 | --heldout4 | --heldout5]
+        [--heldout | --heldout2 | --heldout3 | --heldout4 | --heldout5 | --heldout6]
         [--parts single bias window zoom preset_bias weights tau] [--objects N]
         [--set NAME=VALUE]
 
@@ -20,6 +20,11 @@ axis, polygon masks with holes, 8-bit NOCS) was fixed on 23 Nov 2026 and run onc
 --heldout5 (seeds from 1010000 and 1015000, a sixth error model: depth fields piecewise constant
 over tiles, a decaying halo at depth edges, one part of each object's NOCS displaced, masks
 filled to their convex hull) was fixed on 24 Nov 2026 before that round's choices.
+--heldout6 (seeds from 1020000 and 1025000, a seventh error model: a depth field growing with
+the squared distance from the image centre plus fields along the image rows, foreground
+fattening at depth edges, NOCS shrunk or swollen near each silhouette, masks through a 28x28
+mask head) was fixed on 24 Nov 2026 in a round that changed no estimate, and run once at its
+end.
 
 Single frames, per preset: median and p90 |focal error| (%), signed median (%), share of frames
 with an estimate, and for fcop_ros the coverage of |error| <= 2 std_rel; beside it the paper's
@@ -391,6 +396,8 @@ def main() -> None:
                       help="the fourth held-out seeds and error model instead")
     held.add_argument("--heldout5", action="store_true",
                       help="the fifth held-out seeds and error model instead")
+    held.add_argument("--heldout6", action="store_true",
+                      help="the sixth held-out seeds and error model instead")
     ap.add_argument("--parts", nargs="+", default=["single", "bias", "window"],
                     choices=["single", "bias", "window", "zoom", "preset_bias", "weights",
                              "tau"],
@@ -429,6 +436,7 @@ def main() -> None:
         else ("heldout3", 980000, 985000) if args.heldout3
         else ("heldout4", 990000, 995000) if args.heldout4
         else ("heldout5", 1010000, 1015000) if args.heldout5
+        else ("heldout6", 1020000, 1025000) if args.heldout6
         else ("tuning", 1000, 5000)
     )
     print(

@@ -47,6 +47,15 @@ is a halo that decays away from each depth edge rather than a band; each object'
 split by a random plane through the object and one side is displaced (a part, such as a
 handle, put a little off); and each instance's mask is its convex hull (what a box-prompted
 segmenter fills in: the concavities between handle and body, the background between parts).
+A sixth (``variant="heldout6"``, fixed on 24 Nov 2026 before that round's evaluation and run
+once, at its end, on an estimator that round did not change) errs as a network trained on other
+cameras does: its coarsest depth field grows with the squared distance from the image centre
+(a field-of-view prior: the error a focal length would make), the finer ones vary along the
+image rows only (a ground-plane prior); at depth edges the nearer surface spreads over the
+farther one (foreground fattening) instead of blending; each object's NOCS shrink towards
+(or swell from) its centre near its silhouette, where a network regresses to the mean; and
+each instance's mask is what a 28x28 mask head gives, its box resampled to 28x28 and back and
+thresholded at a level drawn per instance.
 """
 from __future__ import annotations
 
@@ -217,9 +226,24 @@ def _tile_field(rng, h, w, cells):
     return (out - out.mean()) / max(out.std(), 1e-9)
 
 
-VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5")
+def _lens_row_field(rng, h, w, cells):
+    """The coarsest scale (cells 1): the squared distance from the image centre, of random
+    sign; finer ones: a function of the image row alone (cells + 2 random levels down the
+    image, cubic between them). Zero mean and unit std."""
+    if cells <= 1:
+        yy, xx = np.mgrid[0:h, 0:w]
+        out = ((yy - (h - 1) / 2) ** 2 + (xx - (w - 1) / 2) ** 2) * rng.choice([-1.0, 1.0])
+    else:
+        levels = rng.normal(size=(cells + 2, 1)).astype(np.float32)
+        rows = cv2.resize(levels, (1, h), interpolation=cv2.INTER_CUBIC).astype(np.float64)
+        out = np.broadcast_to(rows, (h, w)).copy()
+    return (out - out.mean()) / max(out.std(), 1e-9)
+
+
+VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5", "heldout6")
 _FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field,
-           "heldout3": _poly_field, "heldout4": _ring_field, "heldout5": _tile_field}
+           "heldout3": _poly_field, "heldout4": _ring_field, "heldout5": _tile_field,
+           "heldout6": _lens_row_field}
 
 
 @dataclass
@@ -344,6 +368,10 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             share = np.exp(-dist / max(e.edge_px, 1)).astype(np.float64)
             halo = finite & (share > 0.02)
             depth[halo] = (1 - share[halo]) * depth[halo] + share[halo] * blurred[halo]
+        elif state.variant == "heldout6":
+            # The nearer surface spreads over the farther: the band takes its nearest depth.
+            near = cv2.erode(filled, np.ones((k, k), np.uint8)).astype(np.float64)
+            depth[band] = near[band]
         else:
             depth[band] = blurred[band]
         if e.flying > 0:
@@ -394,6 +422,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             nocs = _view_stretch(nocs, frame, state, rng, e.nocs_field)
         elif state.variant == "heldout5":
             nocs = _part_shift(nocs, mask, state, rng, e.nocs_field)
+        elif state.variant == "heldout6":
+            nocs = _rim_shrink(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout":
             # Scaled to ``nocs_field`` rms on the objects, as the other variants' distortions:
             # unscaled, q^T W q with |q| < 0.5 moved the NOCS 8x less than the tuning field.
@@ -477,6 +507,38 @@ def _part_shift(nocs, mask, state, rng, rms):
     return out
 
 
+def _rim_shrink(nocs, mask, state, rng, rms):
+    """Each object's NOCS moved towards its centre (or away from it: a sign per object for the
+    sequence) by a share that decays with the distance from its silhouette over a few pixels,
+    scaled to ``rms`` per NOCS axis over the object: a network that regresses to the mean where
+    its view of the object ends."""
+    out = nocs.copy()
+    for iid in np.unique(mask[mask > 0]):
+        m = mask == iid
+        sign = state._sign(("rim", int(iid)), rng)
+        reach = state._kept(("rim_px", int(iid)), lambda: float(rng.uniform(2.0, 6.0)))
+        dist = cv2.distanceTransform(m.astype(np.uint8), cv2.DIST_L2, 3)[m]
+        q = nocs[m] - nocs[m].mean(0)
+        move = -q * np.exp(-(dist - 1.0) / reach)[:, None]
+        out[m] = nocs[m] + sign * rms * move / max(np.sqrt(np.mean(move ** 2)), 1e-9)
+    return out
+
+
+def _mask_head(m, rng):
+    """Instance mask m as a 28x28 mask head gives it: its box resampled to 28x28 (area) and
+    back (bilinear), thresholded at a level drawn in 0.3-0.7 (the head's bias, per instance)."""
+    ys, xs = np.nonzero(m)
+    if len(ys) == 0:
+        return m.astype(np.uint8)
+    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+    crop = m[y0:y1, x0:x1].astype(np.float32)
+    small = cv2.resize(crop, (28, 28), interpolation=cv2.INTER_AREA)
+    back = cv2.resize(small, (x1 - x0, y1 - y0), interpolation=cv2.INTER_LINEAR)
+    out = np.zeros(m.shape, np.uint8)
+    out[y0:y1, x0:x1] = back > rng.uniform(0.3, 0.7)
+    return out
+
+
 def _view_stretch(nocs, frame, state, rng, rms):
     """Each object's NOCS stretched or flattened (per object, for the whole sequence) along the
     NOCS direction that depth follows on the object (the viewing axis in its frame, from the
@@ -536,7 +598,8 @@ def _ragged(m, px, rng):
 
 def _mask_errors(mask, nocs, px, rng, variant):
     """Erode or dilate (``heldout2``: shift; ``heldout3``: fray; ``heldout4``: outline as a
-    polygon with holes; ``heldout5``: fill to the convex hull) each instance by up to ``px``
+    polygon with holes; ``heldout5``: fill to the convex hull; ``heldout6``: through a 28x28
+    mask head) each instance by up to ``px``
     pixels; grown pixels keep the background depth and take the nearest object's NOCS, as a
     segmentation network's would."""
     shape = {"heldout": cv2.MORPH_ELLIPSE, "heldout3": cv2.MORPH_CROSS}.get(variant,
@@ -557,6 +620,8 @@ def _mask_errors(mask, nocs, px, rng, variant):
             m = _polygon(m, px, rng)
         elif variant == "heldout5":
             m = _hull(m)
+        elif variant == "heldout6":
+            m = _mask_head(m, rng)
         elif r := int(rng.integers(-px, px + 1)):
             kern = cv2.getStructuringElement(shape, (2 * abs(r) + 1,) * 2)
             m = cv2.dilate(m, kern) if r > 0 else cv2.erode(m, kern)
