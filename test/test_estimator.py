@@ -421,3 +421,15 @@ def test_a_depth_offset_biases_the_focal_beyond_what_std_rel_says():
             est = estimate_focal(depth, fr.nocs, fr.mask, seed=1)
             err = np.log(est.focal / fr.focal)
             assert err > least and err > beyond * est.std_rel, (seed, err, est.std_rel)
+
+
+def test_an_erosion_wider_than_any_image_is_refused():
+    """erode_px had no upper bound and costs a pass per pixel of it: erode_px=10**9 never
+    returned. An erosion beyond half the largest image side removes every object."""
+    from fcop_ros.core.options import MAX_ERODE_PX
+    assert EstimatorOptions(erode_px=MAX_ERODE_PX).erode_px == MAX_ERODE_PX
+    for bad in (MAX_ERODE_PX + 1, 10**9):
+        with pytest.raises(ValueError, match=rf"erode_px must be an integer in \[0, "
+                                             rf"{MAX_ERODE_PX}\]"):
+            EstimatorOptions(erode_px=bad)
+
