@@ -433,3 +433,24 @@ def test_an_erosion_wider_than_any_image_is_refused():
                                              rf"{MAX_ERODE_PX}\]"):
             EstimatorOptions(erode_px=bad)
 
+
+def test_options_that_refuse_every_object_say_so():
+    """Settings accepted and then refusing every object read like faults of the frame:
+    fit_iterations=1 ('degenerate fit': one iteration takes no step) is refused where it is
+    set; max_pixels below min_object_pixels ('no instance with >= 50 valid pixels') and
+    min_fit_quality=1.0 ('explain 100% (< 100%): not the predicted category') are named in
+    the reason: the node allows min_object_pixels above max_pixels, and exact NOCS meet 1.0."""
+    with pytest.raises(ValueError, match="fit_iterations must be an integer >= 2"):
+        EstimatorOptions(fit_iterations=1)
+    fr = clean_frame(0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0,
+                         options=EstimatorOptions(max_pixels=10, min_object_pixels=50))
+    assert est.focal is None
+    assert "min_object_pixels=50 is above max_pixels=10" in est.reason, est.reason
+    fr = noisy_frame(2, "moderate")
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0,
+                         options=EstimatorOptions(min_fit_quality=1.0))
+    assert est.focal is None and est.rejected
+    poor = [why for why in est.rejected.values() if "NOCS explain" in why]
+    assert poor and all("below min_fit_quality=1 (the default 0.85 keeps it)" in why
+                        and "100" not in why for why in poor), est.rejected

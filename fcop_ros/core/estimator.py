@@ -12,6 +12,7 @@ the combined focal length. ``method="ransac"`` replaces stabbing by the paper's 
 
 from __future__ import annotations
 
+import math
 import numbers
 
 from dataclasses import dataclass, field
@@ -144,6 +145,9 @@ def _no_instance_reason(depth, nocs, mask, opt: EstimatorOptions) -> str:
     if not predicted.any():
         return "the NOCS are zero or not finite (no prediction) on every object pixel"
     reason = f"no instance with >= {opt.min_object_pixels} valid pixels"
+    if opt.min_object_pixels > opt.max_pixels:
+        reason += (f" (min_object_pixels={opt.min_object_pixels} is above max_pixels="
+                   f"{opt.max_pixels}, about what a large object keeps: lower min_object_pixels)")
     top = float(np.max(p[predicted]))
     low = float(np.min(p[predicted]))
     if top > 1 + NOCS_TOLERANCE or low < -NOCS_TOLERANCE:
@@ -358,6 +362,17 @@ def _noise_reason(inst) -> str:
     """Why an object whose NOCS are noise (``sigma_p`` >= _NOISE_NOT_SHAPE) is no shape."""
     return (f"its NOCS vary by {inst.sigma_p:.2f} from pixel to pixel: noise, not a shape "
             "(random or shuffled NOCS?)")
+
+
+def _quality_reason(quality: float, least: float) -> str:
+    """Why an object whose NOCS explain ``quality`` of its shape is refused by min_fit_quality
+    ``least``: the share rounded down, so that it never reads as the threshold, and the setting
+    blamed when the default would keep the object."""
+    head = f"its NOCS explain {math.floor(quality * 1000) / 10:.1f}% of its shape"
+    if quality >= _DEFAULT_OPTIONS.min_fit_quality:
+        return (f"{head}, below min_fit_quality={least:g} (the default "
+                f"{_DEFAULT_OPTIONS.min_fit_quality:g} keeps it): lower min_fit_quality")
+    return f"{head}, below min_fit_quality={least:g}: not the predicted category"
 
 
 def _flat_reason(ratios) -> str | None:
@@ -619,10 +634,7 @@ def estimate_focal(
                 "too small a piece of the category's shape"
             )
         elif fits.quality[k] < opt.min_fit_quality:
-            est.rejected[inst.instance_id] = (
-                f"its NOCS explain {fits.quality[k]:.0%} of its shape "
-                f"(< {opt.min_fit_quality:.0%}): not the predicted category"
-            )
+            est.rejected[inst.instance_id] = _quality_reason(fits.quality[k], opt.min_fit_quality)
         elif flat[k] is not None:
             est.rejected[inst.instance_id] = flat[k]
     first_flat = next(((inst.instance_id, why) for inst, why in zip(instances, flat)

@@ -151,9 +151,9 @@ class EstimatorOptions:
 # Each setting's rule, so that a wrong value fails where it is set: integers at least this ...
 _EST_INTEGERS = {
     "triplets_per_object": 1, "min_object_pixels": 1, "max_instances": 1, "max_pixels": 1,
-    "fit_pixels": 1, "fit_iterations": 1, "ransac_hypotheses": 1, "min_frame_votes": 0,
+    "fit_pixels": 1, "fit_iterations": 2, "ransac_hypotheses": 1, "min_frame_votes": 0,
     "erode_px": 0, "denoise_radius": 0,
-}
+}  # (fit_iterations: the last iteration only measures, so a single one fits nothing)
 # ... and at most this.
 _EST_INTEGER_TOPS = {"erode_px": MAX_ERODE_PX}
 # ... and numbers within [low, high] (0 switches the outlier and edge tests off).
