@@ -454,3 +454,19 @@ def test_options_that_refuse_every_object_say_so():
     poor = [why for why in est.rejected.values() if "NOCS explain" in why]
     assert poor and all("below min_fit_quality=1 (the default 0.85 keeps it)" in why
                         and "100" not in why for why in poor), est.rejected
+
+
+def test_the_nocs_range_hint_fits_the_image_type():
+    """16-bit NOCS were told to 'divide 8-bit NOCS by 255'; the hint follows the image's type,
+    and floats beyond 255 get the range alone."""
+    fr = clean_frame(0)
+    tiny = np.zeros_like(fr.mask)
+    tiny[200:206, 300:306] = 1  # too few pixels to sample: the hint comes with the pixel count
+    for dtype, words in ((np.uint16, "divide 16-bit NOCS by 65535"),
+                         (np.uint8, "divide 8-bit NOCS by 255")):
+        nocs = (fr.nocs * np.iinfo(dtype).max).astype(dtype)
+        for mask in (fr.mask, tiny):
+            est = estimate_focal(fr.depth, nocs, mask, seed=0)
+            assert est.focal is None and words in est.reason, est.reason
+    est = estimate_focal(fr.depth, fr.nocs * 1000.0, fr.mask, seed=0)
+    assert est.reason.endswith("they must lie in [0, 1])"), est.reason

@@ -151,7 +151,7 @@ def _no_instance_reason(depth, nocs, mask, opt: EstimatorOptions) -> str:
     top = float(np.max(p[predicted]))
     low = float(np.min(p[predicted]))
     if top > 1 + NOCS_TOLERANCE or low < -NOCS_TOLERANCE:
-        reason += f" ({nocs_range_hint(low, top)})"
+        reason += f" ({nocs_range_hint(low, top, nocs.dtype)})"
     return reason
 
 
@@ -525,7 +525,7 @@ def estimate_focal(
     if sampled >= 20 and share > 0.2:
         return FocalEstimate(None, reason=(
             f"NOCS outside [0, 1] on {share:.0%} of the object pixels sampled "
-            f"({nocs_range_hint(low, high)})"), **base)
+            f"({nocs_range_hint(low, high, nocs.dtype)})"), **base)
     instances = extract_instances(
         depth,
         nocs,
