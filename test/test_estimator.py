@@ -470,3 +470,19 @@ def test_the_nocs_range_hint_fits_the_image_type():
             assert est.focal is None and words in est.reason, est.reason
     est = estimate_focal(fr.depth, fr.nocs * 1000.0, fr.mask, seed=0)
     assert est.reason.endswith("they must lie in [0, 1])"), est.reason
+
+
+def test_one_object_with_a_lost_channel_is_named_as_several_are():
+    """One object whose NOCS lost a channel was refused with the shape wording ('its NOCS
+    explain 83% ...: not the predicted category'); several get the lost-channel wording."""
+    fr = clean_frame(2)
+    ids = [i for i in np.unique(fr.mask) if i > 0]
+    has = (fr.nocs != 0).any(2)
+    flat = fr.nocs.copy()
+    flat[..., 0] = np.where(has, 0.5, 0.0)
+    words = "NOCS channel 0 is 0.500 on every object: a lost channel? the frame is refused ("
+    for keep in (ids[:1], ids[1:2], ids):
+        mask = np.where(np.isin(fr.mask, keep), fr.mask, 0)
+        est = estimate_focal(fr.depth, flat, mask, seed=0, poses=False)
+        assert est.focal is None and est.reason.startswith(words), (keep, est.reason)
+

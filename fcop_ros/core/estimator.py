@@ -639,6 +639,8 @@ def estimate_focal(
             est.rejected[inst.instance_id] = flat[k]
     first_flat = next(((inst.instance_id, why) for inst, why in zip(instances, flat)
                        if why is not None), None)
+    if first_flat is None and not good.any():  # refused anyway: named alike if a channel is lost
+        first_flat = next(iter(est.rejected.items()), None)
     lost = _constant_channel(instances) if first_flat else None
     if lost is not None:
         # A channel constant over every object is a fault of the whole NOCS image: the objects
@@ -647,8 +649,8 @@ def estimate_focal(
         # left 5). Any object that reads flat raises the question, also one refused for
         # another reason first (a user's 120 frames: 11 answered when only objects that passed
         # the other checks could, 2 now). One object's flat NOCS refuse only that object.
-        est.reason = (f"object {first_flat[0]}: {first_flat[1]} {_lost_text(lost)}: the frame "
-                      "is refused")
+        est.reason = (f"{_lost_text(lost)}: a lost channel? the frame is refused (object "
+                      f"{first_flat[0]}: {first_flat[1]})")
         return est
     est.mirrored = [
         inst.instance_id for k, inst in enumerate(support) if good[k] and fits.mirrored[k]
