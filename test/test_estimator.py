@@ -486,3 +486,16 @@ def test_one_object_with_a_lost_channel_is_named_as_several_are():
         est = estimate_focal(fr.depth, flat, mask, seed=0, poses=False)
         assert est.focal is None and est.reason.startswith(words), (keep, est.reason)
 
+
+
+def test_a_principal_point_of_bools_is_refused():
+    """(True, False) was taken as (1.0, 0.0) and ("320", "240") as numbers: neither is a pair of
+    coordinates; numpy's numbers are."""
+    fr = clean_frame(0)
+    for pp in ((True, False), (np.True_, 240.0), ("320", "240")):
+        with pytest.raises(ValueError, match="two numbers"):
+            estimate_focal(fr.depth, fr.nocs, fr.mask, pp, seed=0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, (np.float32(320), np.int64(240)), seed=0)
+    assert est.principal_point == (320.0, 240.0)
+
+
