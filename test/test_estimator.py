@@ -499,3 +499,18 @@ def test_a_principal_point_of_bools_is_refused():
     assert est.principal_point == (320.0, 240.0)
 
 
+
+
+def test_depth_far_outside_metres_is_refused_and_units_slips_are_not():
+    """Depth of 1e-9 or 1e100 times a scene's gave 1078 px for 629 (the fit's floors are in
+    metres) or 'degenerate geometry'; 1e300 raised OverflowError. Millimetres for metres (x1000)
+    and back (x0.001) give the same focal; depth whose objects' median is outside 1e-4 .. 1e6 m
+    is refused with the reason."""
+    fr = clean_frame(1)
+    base = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0, poses=False).focal
+    for k in (1e-3, 1e3):
+        est = estimate_focal(fr.depth * k, fr.nocs, fr.mask, seed=0, poses=False)
+        assert est.focal == pytest.approx(base, rel=1e-9)
+    for k in (1e-9, 1e-5, 1e7, 1e100, 1e300):
+        est = estimate_focal(fr.depth * k, fr.nocs, fr.mask, seed=0, poses=False)
+        assert est.focal is None and "outside 0.0001 .. 1e+06 m" in est.reason, (k, est.reason)
