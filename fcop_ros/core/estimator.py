@@ -162,7 +162,7 @@ def _no_instance_reason(depth, nocs, mask, opt: EstimatorOptions) -> str:
 
 def _object_depth(depth, mask, stride: int = 8):
     """The median valid depth on the object pixels of every ``stride``-th row and column (on
-    all object pixels if those have none; None if no object pixel has one): a few microseconds,
+    all object pixels if those have none; None if no object pixel has one): ~50 us at 640x480,
     so that every frame's depth is checked against DEPTH_RANGE."""
     d = depth[::stride, ::stride][mask[::stride, ::stride] > 0]
     d = d[np.isfinite(d) & (d > 0)]
