@@ -190,7 +190,8 @@ def test_mask_types(monkeypatch, dtype):
 @pytest.mark.parametrize("dtype", ["int8", "uint8", "int16", "uint64"])
 def test_eroded_crops(dtype):
     """The compiled crop mask (compare, erode, stride in one pass) is cv2.erode's with a zero
-    border, for random blobs, boxes inside and at the image's edge, 0-2 erosions, strides 1-3."""
+    border, for random blobs, boxes inside and at the image's edge, 0-2 erosions and 7 and 25
+    (beyond half of most boxes, where the row pass stops early), strides 1-3."""
     import cv2
 
     from fcop_ros.core.correspondences import _eroded_crop_k
@@ -212,7 +213,7 @@ def test_eroded_crops(dtype):
         c0, c1 = sorted(int(v) for v in rng.integers(0, w + 1, 2))
         if r1 == r0 or c1 == c0:
             continue
-        for k in (0, 1, 2):
+        for k in (0, 1, 2, 7, 25):
             for st in (1, 2, 3):
                 want = m[r0:r1, c0:c1] == 1
                 if k:

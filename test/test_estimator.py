@@ -421,3 +421,96 @@ def test_a_depth_offset_biases_the_focal_beyond_what_std_rel_says():
             est = estimate_focal(depth, fr.nocs, fr.mask, seed=1)
             err = np.log(est.focal / fr.focal)
             assert err > least and err > beyond * est.std_rel, (seed, err, est.std_rel)
+
+
+def test_an_erosion_wider_than_any_image_is_refused():
+    """erode_px had no upper bound and costs a pass per pixel of it: erode_px=10**9 never
+    returned. An erosion beyond half the largest image side removes every object."""
+    from fcop_ros.core.options import MAX_ERODE_PX
+    assert EstimatorOptions(erode_px=MAX_ERODE_PX).erode_px == MAX_ERODE_PX
+    for bad in (MAX_ERODE_PX + 1, 10**9):
+        with pytest.raises(ValueError, match=rf"erode_px must be an integer in \[0, "
+                                             rf"{MAX_ERODE_PX}\]"):
+            EstimatorOptions(erode_px=bad)
+
+
+def test_options_that_refuse_every_object_say_so():
+    """Settings accepted and then refusing every object read like faults of the frame:
+    fit_iterations=1 ('degenerate fit': one iteration takes no step) is refused where it is
+    set; max_pixels below min_object_pixels ('no instance with >= 50 valid pixels') and
+    min_fit_quality=1.0 ('explain 100% (< 100%): not the predicted category') are named in
+    the reason: the node allows min_object_pixels above max_pixels, and exact NOCS meet 1.0."""
+    with pytest.raises(ValueError, match="fit_iterations must be an integer >= 2"):
+        EstimatorOptions(fit_iterations=1)
+    fr = clean_frame(0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0,
+                         options=EstimatorOptions(max_pixels=10, min_object_pixels=50))
+    assert est.focal is None
+    assert "min_object_pixels=50 is above max_pixels=10" in est.reason, est.reason
+    fr = noisy_frame(2, "moderate")
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0,
+                         options=EstimatorOptions(min_fit_quality=1.0))
+    assert est.focal is None and est.rejected
+    poor = [why for why in est.rejected.values() if "NOCS explain" in why]
+    assert poor and all("below min_fit_quality=1 (the default 0.85 keeps it)" in why
+                        and "100" not in why for why in poor), est.rejected
+
+
+def test_the_nocs_range_hint_fits_the_image_type():
+    """16-bit NOCS were told to 'divide 8-bit NOCS by 255'; the hint follows the image's type,
+    and floats beyond 255 get the range alone."""
+    fr = clean_frame(0)
+    tiny = np.zeros_like(fr.mask)
+    tiny[200:206, 300:306] = 1  # too few pixels to sample: the hint comes with the pixel count
+    for dtype, words in ((np.uint16, "divide 16-bit NOCS by 65535"),
+                         (np.uint8, "divide 8-bit NOCS by 255")):
+        nocs = (fr.nocs * np.iinfo(dtype).max).astype(dtype)
+        for mask in (fr.mask, tiny):
+            est = estimate_focal(fr.depth, nocs, mask, seed=0)
+            assert est.focal is None and words in est.reason, est.reason
+    est = estimate_focal(fr.depth, fr.nocs * 1000.0, fr.mask, seed=0)
+    assert est.reason.endswith("they must lie in [0, 1])"), est.reason
+
+
+def test_one_object_with_a_lost_channel_is_named_as_several_are():
+    """One object whose NOCS lost a channel was refused with the shape wording ('its NOCS
+    explain 83% ...: not the predicted category'); several get the lost-channel wording."""
+    fr = clean_frame(2)
+    ids = [i for i in np.unique(fr.mask) if i > 0]
+    has = (fr.nocs != 0).any(2)
+    flat = fr.nocs.copy()
+    flat[..., 0] = np.where(has, 0.5, 0.0)
+    words = "NOCS channel 0 is 0.500 on every object: a lost channel? the frame is refused ("
+    for keep in (ids[:1], ids[1:2], ids):
+        mask = np.where(np.isin(fr.mask, keep), fr.mask, 0)
+        est = estimate_focal(fr.depth, flat, mask, seed=0, poses=False)
+        assert est.focal is None and est.reason.startswith(words), (keep, est.reason)
+
+
+
+def test_a_principal_point_of_bools_is_refused():
+    """(True, False) was taken as (1.0, 0.0) and ("320", "240") as numbers: neither is a pair of
+    coordinates; numpy's numbers are."""
+    fr = clean_frame(0)
+    for pp in ((True, False), (np.True_, 240.0), ("320", "240")):
+        with pytest.raises(ValueError, match="two numbers"):
+            estimate_focal(fr.depth, fr.nocs, fr.mask, pp, seed=0)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, (np.float32(320), np.int64(240)), seed=0)
+    assert est.principal_point == (320.0, 240.0)
+
+
+
+
+def test_depth_far_outside_metres_is_refused_and_units_slips_are_not():
+    """Depth of 1e-9 or 1e100 times a scene's gave 1078 px for 629 (the fit's floors are in
+    metres) or 'degenerate geometry'; 1e300 raised OverflowError. Millimetres for metres (x1000)
+    and back (x0.001) give the same focal; depth whose objects' median is outside 1e-4 .. 1e6 m
+    is refused with the reason."""
+    fr = clean_frame(1)
+    base = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0, poses=False).focal
+    for k in (1e-3, 1e3):
+        est = estimate_focal(fr.depth * k, fr.nocs, fr.mask, seed=0, poses=False)
+        assert est.focal == pytest.approx(base, rel=1e-9)
+    for k in (1e-9, 1e-5, 1e7, 1e100, 1e300):
+        est = estimate_focal(fr.depth * k, fr.nocs, fr.mask, seed=0, poses=False)
+        assert est.focal is None and "outside 0.0001 .. 1e+06 m" in est.reason, (k, est.reason)

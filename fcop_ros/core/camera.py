@@ -1,5 +1,8 @@
 """Camera conventions every layer shares, so that each is written once."""
 import math
+import numbers
+
+import numpy as np
 
 
 def image_centre(width: int, height: int) -> tuple[float, float]:
@@ -14,10 +17,15 @@ def inside_image(cx: float, cy: float, width: int, height: int) -> bool:
 
 
 def checked_principal_point(principal_point, width: int, height: int) -> tuple[float, float]:
-    """(cx, cy) as floats, or a ValueError naming what is wrong: anything but two finite numbers
-    on the image (a principal point off the image is a slip, e.g. (cy, cx) or a crop's)."""
+    """(cx, cy) as floats, or a ValueError naming what is wrong: anything but two finite real
+    numbers (not bools or text) on the image (a principal point off the image is a slip, e.g.
+    (cy, cx) or a crop's)."""
     try:
-        cx, cy = (float(v) for v in principal_point)
+        cx, cy = principal_point
+        if not all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+                   for v in (cx, cy)):  # True is no coordinate, nor is the text "320"
+            raise TypeError
+        cx, cy = float(cx), float(cy)
     except (TypeError, ValueError):
         raise ValueError(
             f"principal_point must be two numbers (cx, cy) in pixels, got {principal_point!r}"

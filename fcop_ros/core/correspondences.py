@@ -137,10 +137,14 @@ def nocs_range(nocs, mask, stride: int = 8):
     return float(np.count_nonzero(out)) / len(lo), len(lo), float(lo.min()), float(hi.max())
 
 
-def nocs_range_hint(low: float, high: float) -> str:
-    """What NOCS values spanning [low, high] suggest, for a reason: 8-bit, centred or other."""
-    if high > 1.5:
-        return f"NOCS values reach {high:.4g}; they must lie in [0, 1]: divide 8-bit NOCS by 255"
+def nocs_range_hint(low: float, high: float, dtype=None) -> str:
+    """What NOCS values spanning [low, high] suggest, for a reason: integers of ``dtype`` (the
+    image's type) or floats up to 255 to be divided by their type's top, centred, or other."""
+    integer = dtype is not None and np.dtype(dtype).kind in "iu"
+    if high > 1.5 and (integer or high <= 255 * (1 + NOCS_TOLERANCE)):
+        bits, top = (np.dtype(dtype).itemsize * 8, np.iinfo(dtype).max) if integer else (8, 255)
+        return (f"NOCS values reach {high:.4g}; they must lie in [0, 1]: divide {bits}-bit NOCS "
+                f"by {top}")
     if low < -NOCS_TOLERANCE and high <= 0.5 + NOCS_TOLERANCE:
         return (f"NOCS values span [{low:.3g}, {high:.3g}]; they must lie in [0, 1]: centred "
                 "NOCS (in [-0.5, 0.5])? add 0.5")
@@ -1042,7 +1046,9 @@ def _eroded_crop_t(vals, iid, r0, r1, c0, c1, k, st):
         b = np.empty(w, np.uint8)
         for i in range(h):
             ai = a[i]
-            for _ in range(k):  # k 3-wide erosions, the box's outside as background
+            # k 3-wide erosions, the box's outside as background; (w + 1) // 2 of them
+            # leave none of the row, so more cost time and change nothing.
+            for _ in range(min(k, (w + 1) // 2)):
                 b[0] = 0
                 b[w - 1] = 0
                 for j in range(1, w - 1):

@@ -12,6 +12,7 @@ the combined focal length. ``method="ransac"`` replaces stabbing by the paper's 
 
 from __future__ import annotations
 
+import math
 import numbers
 
 from dataclasses import dataclass, field
@@ -41,6 +42,11 @@ from .stabbing import interval_stabbing, stab_equal_width
 
 #: The options of a call without any (frozen, so one instance serves every frame).
 _DEFAULT_OPTIONS = EstimatorOptions()
+# The objects' median depth, metres, of a scene estimate_focal takes: 10 cm to 1 km in metres,
+# millimetres or kilometres. The fits' noise floors are in metres: at 1e-5 of a frame's depth its
+# std_rel drifted (-55% on clean_frame(1)), at 1e-9 its focal (+71%); from 1e10 on, the focal of
+# noisy_frame(3, "harsh") drifted (+0.04%, +4% at 1e15), and 1e300 raised OverflowError.
+DEPTH_RANGE = (1e-4, 1e6)
 
 
 @dataclass(eq=False)
@@ -144,11 +150,26 @@ def _no_instance_reason(depth, nocs, mask, opt: EstimatorOptions) -> str:
     if not predicted.any():
         return "the NOCS are zero or not finite (no prediction) on every object pixel"
     reason = f"no instance with >= {opt.min_object_pixels} valid pixels"
+    if opt.min_object_pixels > opt.max_pixels:
+        reason += (f" (min_object_pixels={opt.min_object_pixels} is above max_pixels="
+                   f"{opt.max_pixels}, about what a large object keeps: lower min_object_pixels)")
     top = float(np.max(p[predicted]))
     low = float(np.min(p[predicted]))
     if top > 1 + NOCS_TOLERANCE or low < -NOCS_TOLERANCE:
-        reason += f" ({nocs_range_hint(low, top)})"
+        reason += f" ({nocs_range_hint(low, top, nocs.dtype)})"
     return reason
+
+
+def _object_depth(depth, mask, stride: int = 8):
+    """The median valid depth on the object pixels of every ``stride``-th row and column (on
+    all object pixels if those have none; None if no object pixel has one): ~50 us at 640x480,
+    so that every frame's depth is checked against DEPTH_RANGE."""
+    d = depth[::stride, ::stride][mask[::stride, ::stride] > 0]
+    d = d[np.isfinite(d) & (d > 0)]
+    if not d.size:
+        d = depth[mask > 0]
+        d = d[np.isfinite(d) & (d > 0)]
+    return float(np.median(d)) if d.size else None
 
 
 def _votes(instances: list[Instance], opt: EstimatorOptions, rng: np.random.Generator):
@@ -360,6 +381,17 @@ def _noise_reason(inst) -> str:
             "(random or shuffled NOCS?)")
 
 
+def _quality_reason(quality: float, least: float) -> str:
+    """Why an object whose NOCS explain ``quality`` of its shape is refused by min_fit_quality
+    ``least``: the share rounded down, so that it never reads as the threshold, and the setting
+    blamed when the default would keep the object."""
+    head = f"its NOCS explain {math.floor(quality * 1000) / 10:.1f}% of its shape"
+    if quality >= _DEFAULT_OPTIONS.min_fit_quality:
+        return (f"{head}, below min_fit_quality={least:g} (the default "
+                f"{_DEFAULT_OPTIONS.min_fit_quality:g} keeps it): lower min_fit_quality")
+    return f"{head}, below min_fit_quality={least:g}: not the predicted category"
+
+
 def _flat_reason(ratios) -> str | None:
     """Why an object's NOCS are refused as flatter than its depth shows, or None."""
     nocs, pixels = ratios[:, 0]
@@ -481,7 +513,8 @@ def estimate_focal(
 
     Args:
         depth: (H,W) z-depth in metres; NaN, inf and <= 0 are invalid. A global scale error of
-            the depth does not change the focal length (it goes into the object scale).
+            the depth does not change the focal length (it goes into the object scale); a frame
+            whose objects' median depth is outside DEPTH_RANGE (1e-4 .. 1e6 m) is refused.
         nocs: (H,W,3) NOCS in [0,1]; all-zero pixels have no prediction.
         mask: (H,W) integer instance ids, 0 = background.
         principal_point: (cx, cy) pixels; default ((W-1)/2, (H-1)/2).
@@ -510,7 +543,13 @@ def estimate_focal(
     if sampled >= 20 and share > 0.2:
         return FocalEstimate(None, reason=(
             f"NOCS outside [0, 1] on {share:.0%} of the object pixels sampled "
-            f"({nocs_range_hint(low, high)})"), **base)
+            f"({nocs_range_hint(low, high, nocs.dtype)})"), **base)
+    level = _object_depth(depth, mask)
+    if level is not None and not DEPTH_RANGE[0] <= level <= DEPTH_RANGE[1]:
+        return FocalEstimate(None, reason=(
+            f"the objects' median depth is {level:.3g} m, outside {DEPTH_RANGE[0]:g} .. "
+            f"{DEPTH_RANGE[1]:g} m: depth must be in metres (another unit, or a wrong scale?)"),
+            **base)
     instances = extract_instances(
         depth,
         nocs,
@@ -619,14 +658,13 @@ def estimate_focal(
                 "too small a piece of the category's shape"
             )
         elif fits.quality[k] < opt.min_fit_quality:
-            est.rejected[inst.instance_id] = (
-                f"its NOCS explain {fits.quality[k]:.0%} of its shape "
-                f"(< {opt.min_fit_quality:.0%}): not the predicted category"
-            )
+            est.rejected[inst.instance_id] = _quality_reason(fits.quality[k], opt.min_fit_quality)
         elif flat[k] is not None:
             est.rejected[inst.instance_id] = flat[k]
     first_flat = next(((inst.instance_id, why) for inst, why in zip(instances, flat)
                        if why is not None), None)
+    if first_flat is None and not good.any():  # refused anyway: named alike if a channel is lost
+        first_flat = next(iter(est.rejected.items()), None)
     lost = _constant_channel(instances) if first_flat else None
     if lost is not None:
         # A channel constant over every object is a fault of the whole NOCS image: the objects
@@ -635,8 +673,8 @@ def estimate_focal(
         # left 5). Any object that reads flat raises the question, also one refused for
         # another reason first (a user's 120 frames: 11 answered when only objects that passed
         # the other checks could, 2 now). One object's flat NOCS refuse only that object.
-        est.reason = (f"object {first_flat[0]}: {first_flat[1]} {_lost_text(lost)}: the frame "
-                      "is refused")
+        est.reason = (f"{_lost_text(lost)}: a lost channel? the frame is refused (object "
+                      f"{first_flat[0]}: {first_flat[1]})")
         return est
     est.mirrored = [
         inst.instance_id for k, inst in enumerate(support) if good[k] and fits.mirrored[k]

@@ -16,6 +16,10 @@ from .stabbing import focal_intervals
 
 BOUND_MODES = ("relative", "absolute")
 MAX_RELATIVE_BOUND = 0.5  # a relative noise bound is a fraction of f up to this
+# An erosion by a 3x3 square k times removes every object narrower than 2k + 1 pixels: beyond
+# half the largest image side the package takes (8192, make_bag's) it removes every object, and
+# its cost grows with k.
+MAX_ERODE_PX = 4096
 METHODS = ("stabbing", "ransac")
 
 
@@ -132,7 +136,7 @@ class EstimatorOptions:
         if not isinstance(self.noise_bound, NoiseBound):
             raise TypeError("noise_bound must be a NoiseBound")
         for name, low in _EST_INTEGERS.items():
-            _check_integer(self, name, low)
+            _check_integer(self, name, low, _EST_INTEGER_TOPS.get(name))
         for name, (low, high) in _EST_NUMBERS.items():
             _check_number(self, name, low, high)
         for name in _EST_FINITE:
@@ -147,9 +151,11 @@ class EstimatorOptions:
 # Each setting's rule, so that a wrong value fails where it is set: integers at least this ...
 _EST_INTEGERS = {
     "triplets_per_object": 1, "min_object_pixels": 1, "max_instances": 1, "max_pixels": 1,
-    "fit_pixels": 1, "fit_iterations": 1, "ransac_hypotheses": 1, "min_frame_votes": 0,
+    "fit_pixels": 1, "fit_iterations": 2, "ransac_hypotheses": 1, "min_frame_votes": 0,
     "erode_px": 0, "denoise_radius": 0,
-}
+}  # (fit_iterations: the last iteration only measures, so a single one fits nothing)
+# ... and at most this.
+_EST_INTEGER_TOPS = {"erode_px": MAX_ERODE_PX}
 # ... and numbers within [low, high] (0 switches the outlier and edge tests off).
 _EST_NUMBERS = {
     "min_inlier_ratio": (0.0, 1.0), "min_fit_quality": (0.0, 1.0),
@@ -163,11 +169,15 @@ _EST_NUMBERS = {
 _EST_FINITE = ("unseen_depth_error", "shape_error", "object_tau", "object_tau_weight")
 
 
-def _check_integer(options, name: str, low: int) -> None:
-    """A ValueError unless ``options.name`` is an integer >= ``low`` (not a bool or a float)."""
+def _check_integer(options, name: str, low: int, high: int | None = None) -> None:
+    """A ValueError unless ``options.name`` is an integer >= ``low`` (and <= ``high``, if given;
+    not a bool or a float)."""
     v = getattr(options, name)
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {v!r}")
+    top = np.inf if high is None else high
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not (
+            low <= v <= top):
+        rule = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise ValueError(f"{name} must be an integer {rule}, got {v!r}")
 
 
 def _check_number(options, name: str, low: float, high: float) -> None:
