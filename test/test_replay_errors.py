@@ -121,7 +121,7 @@ def test_misspelt_parameter_name_is_refused_with_the_known_names(bag, tmp_path, 
             "/**:\n  ros__parameters:\n    widow_frames: 4\n",
             "unknown parameter 'widow_frames' from --params-file",
         ),
-        ("fcop_node:\n  window_frames: 4\n", "section 'fcop_node/window_frames' is not a mapping"),
+        ("fcop_node:\n  window_frames: 4\n", "section 'fcop_node' has no ros__parameters"),
         # Text to rcl; PyYAML 1.1 read 1000 and a date.
         (
             "/**:\n  ros__parameters:\n    window_frames: 1_000\n",
@@ -148,7 +148,8 @@ def test_misspelt_parameter_name_is_refused_with_the_known_names(bag, tmp_path, 
         ),
         (
             "fcop_node:\n  ros_parameters:\n    seed: 1\n",
-            "(did you mean ros__parameters for 'ros_parameters'?)",
+            "section 'fcop_node' has no ros__parameters (did you mean ros__parameters for "
+            "'ros_parameters'?)",
         ),
         # rcl applies sections in file order, a later one winning: here the wildcard's 10.
         (

@@ -260,3 +260,21 @@ def test_demo_refuses_an_input_bag_it_did_not_write(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "is not a bag fcop_demo wrote (it holds notes.txt)" in err and err.count("\n") == 1
     assert (mine / "notes.txt").read_text() == "keep me"
+
+
+# A second review: outputs not ours, damage said where it belongs, limits, topics by name.
+
+
+@pytest.mark.parametrize("content, where", [
+    ("fcop_node:\n  window_frames: 4\n", "section 'fcop_node' has no ros__parameters"),
+    ("/**:\n  window_frames: 4\n", "section '/**' has no ros__parameters"),
+    ("window_frames: 4\n", "'window_frames' (line 1) is outside any section's ros__parameters"),
+])
+def test_params_file_without_ros_parameters_says_so(bag, tmp_path, capsys, content, where):
+    pf = tmp_path / "p.yaml"
+    pf.write_text(content)
+    assert rp.main([str(bag), *topics("--out", str(tmp_path / "o"), "--params-file",
+                                      str(pf))]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert where in line and "not a mapping" not in line
+    assert "'/**:' (or the node's name), then 'ros__parameters:', then the parameters" in line
