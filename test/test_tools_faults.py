@@ -265,6 +265,30 @@ def test_demo_refuses_an_input_bag_it_did_not_write(tmp_path, capsys):
 # A second review: outputs not ours, damage said where it belongs, limits, topics by name.
 
 
+@pytest.mark.parametrize("args, said", [
+    (["--frames", "100001"], "--frames 100001 is too many: at most 100000"),
+    (["--frames", str(10**12)], "at most 100000"),
+    (["--objects", "256"], "--objects 256 is too many: at most 255"),
+])
+def test_make_bag_limits_frames_and_objects(tmp_path, capsys, args, said):
+    assert mb.main([str(tmp_path / "m"), "--width", "8", "--height", "8", *args]) == 2
+    assert said in one_line(capsys.readouterr().err, "fcop_make_bag")
+    assert not (tmp_path / "m").exists()
+
+
+def test_demo_limits_frames(tmp_path, capsys):
+    assert demo.main(["--out", str(tmp_path / "d"), "--frames", str(10**12)]) == 2
+    assert "--frames 1000000000000 is too many: at most 100000" in one_line(
+        capsys.readouterr().err, "fcop_demo")
+    assert not (tmp_path / "d").exists()
+
+
+def test_limits_are_in_the_help():
+    assert "1..100000" in " ".join(demo.build_parser().format_help().split())
+    text = " ".join(mb.build_parser().format_help().split())
+    assert "1..100000" in text and "1..255" in text
+
+
 @pytest.mark.parametrize("content, where", [
     ("fcop_node:\n  window_frames: 4\n", "section 'fcop_node' has no ros__parameters"),
     ("/**:\n  window_frames: 4\n", "section '/**' has no ros__parameters"),
