@@ -264,6 +264,28 @@ def test_demo_refuses_an_input_bag_it_did_not_write(tmp_path, capsys):
 
 # A second review: outputs not ours, damage said where it belongs, limits, topics by name.
 
+def test_an_estimates_csv_or_report_not_ours_is_refused_not_overwritten(bag, tmp_path, capsys):
+    """A user's grades.csv saved as o/estimates.csv, a photo as o/report.png: both were
+    overwritten. A previous replay's (our header, a matplotlib PNG) are replaced."""
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "estimates.csv").write_text("name,grade\nann,1\n")
+    assert rp.main([str(bag), *topics("--out", str(out))]) == 4
+    line = one_line(capsys.readouterr().err)
+    assert f"{out}/estimates.csv exists and is not an estimates.csv of fcop_replay" in line
+    assert (out / "estimates.csv").read_text() == "name,grade\nann,1\n"
+    assert not (out / "fcop_output").exists()
+    (out / "estimates.csv").unlink()
+    (out / "report.png").write_bytes(b"\xff\xd8\xff\xe0 a holiday photo")
+    assert rp.main([str(bag), *topics("--out", str(out))]) == 4
+    line = one_line(capsys.readouterr().err)
+    assert f"{out}/report.png exists and is not a report of fcop_replay" in line
+    assert (out / "report.png").read_bytes() == b"\xff\xd8\xff\xe0 a holiday photo"
+    (out / "report.png").unlink()
+    assert rp.main([str(bag), *topics("--out", str(out))]) == 0
+    assert rp.main([str(bag), *topics("--out", str(out), "--truth-topic",
+                                      mb.TOPICS["truth"])]) == 0
+
 
 @pytest.mark.parametrize("args, said", [
     (["--frames", "100001"], "--frames 100001 is too many: at most 100000"),

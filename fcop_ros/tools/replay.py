@@ -41,8 +41,9 @@ EXIT_CODES = {
         "before"
     ),
     EXIT_OUTPUT: (
-        "the outputs cannot be written (--out not a directory, read-only, disk full); the "
-        "message says what was lost"
+        "the outputs cannot be written (--out not a directory, read-only, disk full) or are not "
+        "a previous replay's (a user's estimates.csv, report.png or fcop_output); the message "
+        "says what was lost"
     ),
     EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
 }
