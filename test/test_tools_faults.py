@@ -311,6 +311,72 @@ def test_limits_are_in_the_help():
     assert "1..100000" in text and "1..255" in text
 
 
+def test_loop_on_a_damaged_bag_says_the_damage_once(tmp_path):
+    from fcop_ros.tools import replay_play
+    from fcop_ros.ros.spin import ros_context
+    import threading
+
+    cut = tmp_path / "cut"
+    mb.make_bag(cut, SequenceSpec(8, 160, 120, 150.0, None, None, "mild", 4), seed=3)
+    f = next(cut.glob("*.mcap"))
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    stop, lines = threading.Event(), []
+    timer = threading.Timer(1.5, stop.set)
+    with ros_context() as (ctx, _):
+        timer.start()
+        r = replay_play.play(cut, list(mb.TOPICS.values())[:3], rate=50.0, loop=True,
+                             context=ctx, stop=stop, wait_subscribers=0, say=lines.append)
+    timer.cancel()
+    damage = [ln for ln in lines if "damaged" in ln]
+    assert r.damaged and r.published > 20, r
+    assert len(damage) == 1 and damage[0].startswith(f"bag damaged ({r.damaged}); looping over")
+
+
+def empty_topic_bag(path):
+    img = depth_to_image(np.ones((8, 8)), "32FC1", header_from_ns(START))
+    with BagWriter(path, "mcap") as w:
+        w.write("/d", img, START)
+        w.write("/n", img, START)
+        w._writer.add_connection("/m", "sensor_msgs/msg/Image", typestore=w._ts)
+    return path
+
+
+@pytest.mark.parametrize("mode", [[], ["--play", "--wait-subscribers", "0"]])
+def test_an_empty_topic_is_refused_alike_offline_and_in_play(tmp_path, capsys, mode):
+    bag = empty_topic_bag(tmp_path / "e")
+    code = rp.main([str(bag), "--depth-topic", "/d", "--nocs-topic", "/n", "--mask-topic", "/m",
+                    *(mode or ["--out", str(tmp_path / "o")])])
+    assert code == 2
+    assert "mask topic '/m' has no messages" in one_line(capsys.readouterr().err)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("option", ["--clock-hz", "--rate", "--wait-subscribers"])
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+def test_play_refuses_non_finite_numbers(tmp_path, capsys, option, value):
+    code = rp.main([str(tmp_path / "absent"), *topics("--play", f"{option}={value}")])
+    assert code == 2
+    line = one_line(capsys.readouterr().err)
+    assert f"{option} must be a finite number" in line and value in line
+
+
+@pytest.mark.parametrize("main, args", [
+    (mb.main, ["m", "--focal", "nan"]), (mb.main, ["m", "--rate", "inf"]),
+    (demo.main, ["--zoom-focal", "inf"]), (demo.main, ["--focal", "nan"]),
+])
+def test_make_bag_and_demo_refuse_non_finite_numbers(tmp_path, monkeypatch, main, args):
+    monkeypatch.chdir(tmp_path)
+    assert main(args) == 2
+    assert not any(tmp_path.iterdir())
+
+
+def test_play_names_the_input_of_a_missing_topic(bag, capsys):
+    code = rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic", "/nope",
+                    "--mask-topic", mb.TOPICS["mask"], "--play"])
+    assert code == 2
+    assert "nocs topic '/nope' is not in the bag" in one_line(capsys.readouterr().err)
+
+
 @pytest.mark.parametrize("content, where", [
     ("fcop_node:\n  window_frames: 4\n", "section 'fcop_node' has no ros__parameters"),
     ("/**:\n  window_frames: 4\n", "section '/**' has no ros__parameters"),

@@ -33,8 +33,8 @@ EXIT_CODES = {
     ),
     EXIT_INPUT: (
         "unusable input or arguments: missing bag or one that cannot be opened at all, unknown "
-        "topic, wrong type, unsupported encoding, unknown parameter name, invalid parameter "
-        "value or --params-file"
+        "topic or one without messages, wrong type, unsupported encoding, unknown parameter "
+        "name, invalid parameter value or --params-file"
     ),
     EXIT_DAMAGED: (
         "the bag is damaged: read (replayed or played) up to the damage; outputs keep what came "

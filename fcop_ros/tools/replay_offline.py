@@ -17,6 +17,7 @@ from .replay_base import (
     OutputError,
     ReplayError,
     ReplaySummary,
+    check_not_empty,
     check_topics,
     writing,
 )
@@ -171,9 +172,8 @@ def replay(
         wanted["truth"] = (truth_topic, INFO_TYPE)
     try:
         check_topics(source, wanted)
-        total = source.counts.get(depth_topic, 0)
-        if total == 0:
-            raise ReplayError(f"depth topic {depth_topic!r} has no messages")
+        check_not_empty(source, inputs)
+        total = source.counts[depth_topic]
         _check_encodings(source, inputs, lambda raw: deserialize_message(raw, Image))
         _not_the_input(bag, out_dir)
         # Only now is --out touched: the CSV first, so an unwritable one keeps the previous
