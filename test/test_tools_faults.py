@@ -287,6 +287,19 @@ def test_an_estimates_csv_or_report_not_ours_is_refused_not_overwritten(bag, tmp
                                       mb.TOPICS["truth"])]) == 0
 
 
+def test_damaged_bag_with_nothing_published_says_the_damage_on_stderr(tmp_path, capsys):
+    cut = tmp_path / "cut"
+    mb.make_bag(cut, SequenceSpec(12, 160, 120, 150.0, None, None, "mild", 4), seed=3)
+    f = next(cut.glob("*.mcap"))
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    code = rp.main([str(cut), *topics("--out", str(tmp_path / "o"), "-p",
+                                      "max_uncertainty:=0.000001")])
+    assert code == 3
+    line = one_line(capsys.readouterr().err)
+    assert f"bag damaged: {f.name} unreadable after its " in line and "byte" in line
+    assert "held back by max_uncertainty" in line
+
+
 @pytest.mark.parametrize("args, said", [
     (["--frames", "100001"], "--frames 100001 is too many: at most 100000"),
     (["--frames", str(10**12)], "at most 100000"),
@@ -309,6 +322,23 @@ def test_limits_are_in_the_help():
     assert "1..100000" in " ".join(demo.build_parser().format_help().split())
     text = " ".join(mb.build_parser().format_help().split())
     assert "1..100000" in text and "1..255" in text
+
+
+def test_corrupt_metadata_on_an_intact_mcap_is_said_as_such_not_as_damage(bag, tmp_path,
+                                                                          capsys):
+    import shutil
+    broken = tmp_path / "b"
+    shutil.copytree(bag, broken)
+    (broken / "metadata.yaml").write_text("rosbag2_bagfile_information: [\n")
+    assert rp.main([str(broken), *topics("--out", str(tmp_path / "o"))]) == 0
+    out, err = capsys.readouterr()
+    line = one_line(err)
+    assert f"{broken}/metadata.yaml is unreadable" in line and "ros2 bag reindex" in line
+    assert "damaged" not in line and "damaged" not in out and "frames read       5" in out
+    play = topics("--play", "--wait-subscribers", "0", "--rate", "50")
+    assert rp.main([str(broken), *play]) == 0
+    out, err = capsys.readouterr()
+    assert f"{broken}/metadata.yaml is unreadable" in one_line(err) and "published 15" in out
 
 
 def test_loop_on_a_damaged_bag_says_the_damage_once(tmp_path):

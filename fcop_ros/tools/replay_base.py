@@ -76,6 +76,7 @@ class ReplaySummary:
     csv_rows: int = 0
     held_back: int = 0  # frames estimated whose focal the publish gate held back
     held_reason: str = ""  # the gate's word on the last of them
+    metadata_problem: str = ""  # the bag's metadata.yaml unreadable, its .mcap files read
 
     @property
     def fps(self) -> float:

@@ -167,6 +167,7 @@ def replay(
 
     inputs = {"depth": depth_topic, "nocs": nocs_topic, "mask": mask_topic}
     source = BagSource(bag)
+    summary.metadata_problem = source.metadata_problem
     wanted = {role: (t, IMAGE_TYPE) for role, t in inputs.items()}
     if truth_topic is not None:
         wanted["truth"] = (truth_topic, INFO_TYPE)

@@ -107,7 +107,8 @@ def play(
     Before the first message it waits, spinning, up to ``wait_subscribers`` seconds (0: not at
     all) until each image topic has a subscriber, so a live node that is still being discovered
     does not lose the first frames; ``say`` (a function of one line) is told what it waits for
-    and how the wait ended (``PlayResult.no_subscriber``: the topics still without one)."""
+    and how the wait ended (``PlayResult.no_subscriber``: the topics still without one), and
+    of an unreadable metadata.yaml whose .mcap files are played without it."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from rclpy.impl.implementation_singleton import rclpy_implementation
@@ -127,6 +128,8 @@ def play(
     except ReplayError:
         source.close()
         raise
+    if source.metadata_problem:
+        say(source.metadata_problem)
     own = context is None
     if own:
         use_large_image_profile()
