@@ -411,7 +411,8 @@ def test_play_without_subscribers_plays_after_the_wait_and_says_so(tmp_path, cap
     code = rp.main([str(bag), "--depth-topic", topics[0], "--nocs-topic", topics[1],
                     "--mask-topic", topics[2], "--play", "--wait-subscribers", "-1"])
     err = capsys.readouterr().err
-    assert code == rp.EXIT_INPUT and err.strip() == "fcop_replay: --wait-subscribers must be >= 0"
+    assert code == rp.EXIT_INPUT and err.strip() == (
+        "fcop_replay: --wait-subscribers must be a finite number >= 0, got -1")
 
 
 def test_bare_mcap_and_a_bag_without_metadata_replay_as_the_bag(tmp_path, capsys):

@@ -260,3 +260,163 @@ def test_demo_refuses_an_input_bag_it_did_not_write(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "is not a bag fcop_demo wrote (it holds notes.txt)" in err and err.count("\n") == 1
     assert (mine / "notes.txt").read_text() == "keep me"
+
+
+# A second review: outputs not ours, damage said where it belongs, limits, topics by name.
+
+def test_an_estimates_csv_or_report_not_ours_is_refused_not_overwritten(bag, tmp_path, capsys):
+    """A user's grades.csv saved as o/estimates.csv, a photo as o/report.png: both were
+    overwritten. A previous replay's (our header, a matplotlib PNG) are replaced."""
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "estimates.csv").write_text("name,grade\nann,1\n")
+    assert rp.main([str(bag), *topics("--out", str(out))]) == 4
+    line = one_line(capsys.readouterr().err)
+    assert f"{out}/estimates.csv exists and is not an estimates.csv of fcop_replay" in line
+    assert (out / "estimates.csv").read_text() == "name,grade\nann,1\n"
+    assert not (out / "fcop_output").exists()
+    (out / "estimates.csv").unlink()
+    (out / "report.png").write_bytes(b"\xff\xd8\xff\xe0 a holiday photo")
+    assert rp.main([str(bag), *topics("--out", str(out))]) == 4
+    line = one_line(capsys.readouterr().err)
+    assert f"{out}/report.png exists and is not a report of fcop_replay" in line
+    assert (out / "report.png").read_bytes() == b"\xff\xd8\xff\xe0 a holiday photo"
+    (out / "report.png").unlink()
+    assert rp.main([str(bag), *topics("--out", str(out))]) == 0
+    assert rp.main([str(bag), *topics("--out", str(out), "--truth-topic",
+                                      mb.TOPICS["truth"])]) == 0
+
+
+def test_damaged_bag_with_nothing_published_says_the_damage_on_stderr(tmp_path, capsys):
+    cut = tmp_path / "cut"
+    mb.make_bag(cut, SequenceSpec(12, 160, 120, 150.0, None, None, "mild", 4), seed=3)
+    f = next(cut.glob("*.mcap"))
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    code = rp.main([str(cut), *topics("--out", str(tmp_path / "o"), "-p",
+                                      "max_uncertainty:=0.000001")])
+    assert code == 3
+    line = one_line(capsys.readouterr().err)
+    assert f"bag damaged: {f.name} unreadable after its " in line and "byte" in line
+    assert "held back by max_uncertainty" in line
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--frames", "100001"], "--frames 100001 is too many: at most 100000"),
+    (["--frames", str(10**12)], "at most 100000"),
+    (["--objects", "256"], "--objects 256 is too many: at most 255"),
+])
+def test_make_bag_limits_frames_and_objects(tmp_path, capsys, args, said):
+    assert mb.main([str(tmp_path / "m"), "--width", "8", "--height", "8", *args]) == 2
+    assert said in one_line(capsys.readouterr().err, "fcop_make_bag")
+    assert not (tmp_path / "m").exists()
+
+
+def test_demo_limits_frames(tmp_path, capsys):
+    assert demo.main(["--out", str(tmp_path / "d"), "--frames", str(10**12)]) == 2
+    assert "--frames 1000000000000 is too many: at most 100000" in one_line(
+        capsys.readouterr().err, "fcop_demo")
+    assert not (tmp_path / "d").exists()
+
+
+def test_limits_are_in_the_help():
+    assert "1..100000" in " ".join(demo.build_parser().format_help().split())
+    text = " ".join(mb.build_parser().format_help().split())
+    assert "1..100000" in text and "1..255" in text
+
+
+def test_corrupt_metadata_on_an_intact_mcap_is_said_as_such_not_as_damage(bag, tmp_path,
+                                                                          capsys):
+    import shutil
+    broken = tmp_path / "b"
+    shutil.copytree(bag, broken)
+    (broken / "metadata.yaml").write_text("rosbag2_bagfile_information: [\n")
+    assert rp.main([str(broken), *topics("--out", str(tmp_path / "o"))]) == 0
+    out, err = capsys.readouterr()
+    line = one_line(err)
+    assert f"{broken}/metadata.yaml is unreadable" in line and "ros2 bag reindex" in line
+    assert "damaged" not in line and "damaged" not in out and "frames read       5" in out
+    play = topics("--play", "--wait-subscribers", "0", "--rate", "50")
+    assert rp.main([str(broken), *play]) == 0
+    out, err = capsys.readouterr()
+    assert f"{broken}/metadata.yaml is unreadable" in one_line(err) and "published 15" in out
+
+
+def test_loop_on_a_damaged_bag_says_the_damage_once(tmp_path):
+    from fcop_ros.tools import replay_play
+    from fcop_ros.ros.spin import ros_context
+    import threading
+
+    cut = tmp_path / "cut"
+    mb.make_bag(cut, SequenceSpec(8, 160, 120, 150.0, None, None, "mild", 4), seed=3)
+    f = next(cut.glob("*.mcap"))
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    stop, lines = threading.Event(), []
+    timer = threading.Timer(1.5, stop.set)
+    with ros_context() as (ctx, _):
+        timer.start()
+        r = replay_play.play(cut, list(mb.TOPICS.values())[:3], rate=50.0, loop=True,
+                             context=ctx, stop=stop, wait_subscribers=0, say=lines.append)
+    timer.cancel()
+    damage = [ln for ln in lines if "damaged" in ln]
+    assert r.damaged and r.published > 20, r
+    assert len(damage) == 1 and damage[0].startswith(f"bag damaged ({r.damaged}); looping over")
+
+
+def empty_topic_bag(path):
+    img = depth_to_image(np.ones((8, 8)), "32FC1", header_from_ns(START))
+    with BagWriter(path, "mcap") as w:
+        w.write("/d", img, START)
+        w.write("/n", img, START)
+        w._writer.add_connection("/m", "sensor_msgs/msg/Image", typestore=w._ts)
+    return path
+
+
+@pytest.mark.parametrize("mode", [[], ["--play", "--wait-subscribers", "0"]])
+def test_an_empty_topic_is_refused_alike_offline_and_in_play(tmp_path, capsys, mode):
+    bag = empty_topic_bag(tmp_path / "e")
+    code = rp.main([str(bag), "--depth-topic", "/d", "--nocs-topic", "/n", "--mask-topic", "/m",
+                    *(mode or ["--out", str(tmp_path / "o")])])
+    assert code == 2
+    assert "mask topic '/m' has no messages" in one_line(capsys.readouterr().err)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("option", ["--clock-hz", "--rate", "--wait-subscribers"])
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+def test_play_refuses_non_finite_numbers(tmp_path, capsys, option, value):
+    code = rp.main([str(tmp_path / "absent"), *topics("--play", f"{option}={value}")])
+    assert code == 2
+    line = one_line(capsys.readouterr().err)
+    assert f"{option} must be a finite number" in line and value in line
+
+
+@pytest.mark.parametrize("main, args", [
+    (mb.main, ["m", "--focal", "nan"]), (mb.main, ["m", "--rate", "inf"]),
+    (demo.main, ["--zoom-focal", "inf"]), (demo.main, ["--focal", "nan"]),
+])
+def test_make_bag_and_demo_refuse_non_finite_numbers(tmp_path, monkeypatch, main, args):
+    monkeypatch.chdir(tmp_path)
+    assert main(args) == 2
+    assert not any(tmp_path.iterdir())
+
+
+def test_play_names_the_input_of_a_missing_topic(bag, capsys):
+    code = rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic", "/nope",
+                    "--mask-topic", mb.TOPICS["mask"], "--play"])
+    assert code == 2
+    assert "nocs topic '/nope' is not in the bag" in one_line(capsys.readouterr().err)
+
+
+@pytest.mark.parametrize("content, where", [
+    ("fcop_node:\n  window_frames: 4\n", "section 'fcop_node' has no ros__parameters"),
+    ("/**:\n  window_frames: 4\n", "section '/**' has no ros__parameters"),
+    ("window_frames: 4\n", "'window_frames' (line 1) is outside any section's ros__parameters"),
+])
+def test_params_file_without_ros_parameters_says_so(bag, tmp_path, capsys, content, where):
+    pf = tmp_path / "p.yaml"
+    pf.write_text(content)
+    assert rp.main([str(bag), *topics("--out", str(tmp_path / "o"), "--params-file",
+                                      str(pf))]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert where in line and "not a mapping" not in line
+    assert "'/**:' (or the node's name), then 'ros__parameters:', then the parameters" in line

@@ -123,6 +123,24 @@ class _os_errors:
         return False
 
 
+def _metadata_fault(bag: Path, exc: BaseException) -> str:
+    """What is wrong with a bag's metadata.yaml that rosbags refused with ``exc``, in one line:
+    the YAML error and its line, else rosbags' own word."""
+    import yaml
+
+    try:
+        meta = yaml.safe_load((bag / "metadata.yaml").read_text(encoding="utf-8"))
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        at = f" at line {mark.line + 1}" if mark is not None else ""
+        return f"not valid YAML{at}: {getattr(err, 'problem', None) or err}"
+    except (OSError, UnicodeDecodeError) as err:
+        return getattr(err, "strerror", None) or error_text(err)
+    if not isinstance(meta, dict) or "rosbag2_bagfile_information" not in meta:
+        return "no rosbag2_bagfile_information in it"
+    return " ".join(error_text(exc).split())
+
+
 class BagSource:
     """Stream the messages of a bag, surviving damage where the storage allows it.
 
@@ -130,12 +148,15 @@ class BagSource:
     sequentially with the mcap library, in file order: a bare ``.mcap`` file (Foxglove, a
     converter), a bag directory whose recorder died before writing metadata.yaml, or a
     truncated file (no summary at its end), up to the damage; ``damaged`` then says what
-    happened. A damaged sqlite3 bag cannot be salvaged: BagError.
+    happened. When rosbags fails but the .mcap files read to their end, metadata.yaml is what
+    is broken, not the messages: ``metadata_problem`` says so (the caller tells the user), and
+    ``damaged`` stays empty. A damaged sqlite3 bag cannot be salvaged: BagError.
     """
 
     def __init__(self, path):
         self.path = Path(path)
         self.damaged = ""
+        self.metadata_problem = ""
         self._reader = None
         if not self.path.exists():
             raise BagError(f"bag not found: {self.path}")
@@ -161,18 +182,25 @@ class BagSource:
             for c in reader.connections:
                 self.counts[c.topic] = self.counts.get(c.topic, 0) + c.msgcount
         except Exception as exc:  # rosbags raises several types for damaged metadata or storage
+            why = " ".join(f"{type(exc).__name__}: {exc}".split())
             mcaps = sorted(self.path.glob("*.mcap"))
             if not mcaps:
-                raise BagError(f"cannot open bag {self.path}: {exc}") from exc
-            self._read_mcap(mcaps, f"{type(exc).__name__}: {exc}", exc)
+                raise BagError(f"cannot open bag {self.path}: {why}") from exc
+            self._read_mcap(mcaps, why, exc)
+            if not self.damaged:  # the storage reads to its end: metadata.yaml is at fault
+                self.metadata_problem = (
+                    f"{self.path}/metadata.yaml is unreadable ({_metadata_fault(self.path, exc)})"
+                    f": its .mcap files were read without it; `ros2 bag reindex -s mcap "
+                    f"{self.path}` rewrites it")
 
-    def _read_mcap(self, files, damaged: str, cause=None) -> None:
-        """Read ``files`` with the mcap library; ``damaged``: why rosbags could not ('' when
-        rosbags was not asked)."""
-        self._mcap, self.damaged = files, damaged
+    def _read_mcap(self, files, why_not_rosbags: str = "", cause=None) -> None:
+        """Read ``files`` with the mcap library; ``why_not_rosbags``: why rosbags could not
+        ('' when rosbags was not asked)."""
+        self._mcap = files
         self.topics, self.counts = self._scan_mcap()
         if not self.topics:
-            why = f" ({self.damaged})" if self.damaged else ""
+            why = self.damaged or why_not_rosbags
+            why = f" ({why})" if why else ""
             raise BagError(f"cannot open bag {self.path}{why} and no message is "
                            "readable") from cause
 

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from .cli import HelpFormatter
-from .make_bag import MAX_SEED, TOPICS, check_seed_and_size, make_bag
+from .make_bag import MAX_FRAMES, MAX_SEED, TOPICS, check_limits, make_bag
 from .replay_offline import replay
 from ..synthetic import PRESETS, SequenceSpec
 
@@ -22,7 +22,8 @@ def build_parser() -> argparse.ArgumentParser:
                                         "  130 interrupted (Ctrl-C)")
     ap.add_argument("--out", default="out/demo",
                     help="directory for the bag and the replay outputs")
-    ap.add_argument("--frames", type=int, default=60, help="number of frames (640x480 at 30 Hz)")
+    ap.add_argument("--frames", type=int, default=60,
+                    help=f"number of frames, 640x480 at 30 Hz (1..{MAX_FRAMES})")
     ap.add_argument("--preset", default="moderate", choices=sorted(PRESETS), help="noise preset")
     ap.add_argument("--focal", type=float, default=600.0,
                     help="true focal length before the zoom, pixels")
@@ -42,9 +43,9 @@ def main(argv=None) -> int:
     bag = out / "input_bag"
     zoom_frame = (2 * args.frames) // 3
     try:
+        check_limits(args.seed, 640, 480, args.frames, SequenceSpec.objects)
         spec = SequenceSpec(args.frames, 640, 480, args.focal, zoom_frame, args.zoom_focal,
                             args.preset)
-        check_seed_and_size(args.seed, 640, 480)
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out} exists and is not a directory")
         why = not_a_bag_of(bag, "/camera/")

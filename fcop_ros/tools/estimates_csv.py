@@ -10,6 +10,29 @@ from pathlib import Path
 from .replay_base import ReplaySummary, writing
 
 CSV_COLUMNS = ["stamp_ns", "focal", "cx", "cy", "support", "std_rel", "objects"]
+TRUTH_COLUMNS = ["focal_true", "focal_error_pct"]
+_HEADERS = {",".join(CSV_COLUMNS), ",".join(CSV_COLUMNS + TRUTH_COLUMNS)}
+
+
+def not_an_estimates_csv(path: Path) -> str:
+    """Why ``path`` is not an estimates.csv a replay wrote ('' when it is, or is empty or
+    absent): a replay replaces its own table, never a user's file of that name (a user's
+    o/estimates.csv was overwritten). Judged by its header, which every replay writes first."""
+    if not path.exists():
+        return ""
+    if path.is_dir():
+        return "a directory"
+    if not path.is_file():  # a device or a pipe (a link to /dev/null): nothing stored is lost
+        return ""
+    try:
+        with open(path, "rb") as fh:
+            first = fh.readline(1024)
+    except OSError as exc:
+        return f"unreadable: {exc.strerror or exc}"
+    header = first.rstrip(b"\r\n").decode("utf-8", "replace")
+    if not first or header in _HEADERS:
+        return ""
+    return f"its first line is {header[:40]!r}"
 
 
 class EstimatesCsv:
@@ -20,7 +43,7 @@ class EstimatesCsv:
 
     def __init__(self, path: Path, with_truth: bool, summary: ReplaySummary):
         self.path, self.with_truth, self.summary = path, with_truth, summary
-        self.cols = CSV_COLUMNS + (["focal_true", "focal_error_pct"] if with_truth else [])
+        self.cols = CSV_COLUMNS + (TRUTH_COLUMNS if with_truth else [])
         self.pending: list[dict] = []
         self.truth_stamps: list[int] = []
         self.truth_values: list[float] = []

@@ -47,16 +47,23 @@ def _stamp_step(rate: float, frames: int, start_ns: int) -> int:
 
 MAX_SIDE = 8192  # pixels per side: beyond it a frame's float images need gigabytes
 MAX_SEED = 2**31 - 1  # the node's `seed` parameter range, which fcop_demo passes it to
+MAX_FRAMES = 100_000  # 55 minutes at 30 Hz, some 100 GB at 640x480: beyond, a typo
+MAX_OBJECTS = 255  # one instance id each in a mono8 mask (a table in view holds far fewer)
 
 
-def check_seed_and_size(seed: int, width: int, height: int) -> None:
+def check_limits(seed: int, width: int, height: int, frames: int, objects: int) -> None:
     """ValueError for a seed outside 0..MAX_SEED (numpy refuses a negative one, after the bag
-    was created) or an image side above MAX_SIDE (a MemoryError traceback)."""
+    was created), an image side above MAX_SIDE (a MemoryError traceback), more frames than
+    MAX_FRAMES (a bag that fills the disk) or more objects than MAX_OBJECTS (--objects 10**9
+    laid out for hours)."""
     if not 0 <= seed <= MAX_SEED:
         raise ValueError(f"--seed must be an integer in [0, {MAX_SEED}], got {seed}")
     for name, side in (("--width", width), ("--height", height)):
         if side > MAX_SIDE:
             raise ValueError(f"{name} {side} is too large: at most {MAX_SIDE} pixels per side")
+    for name, n, most in (("--frames", frames, MAX_FRAMES), ("--objects", objects, MAX_OBJECTS)):
+        if n > most:
+            raise ValueError(f"{name} {n} is too many: at most {most}")
 
 
 def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0,
@@ -91,7 +98,8 @@ def make_bag(path, spec: SequenceSpec, *, rate: float = 30.0, seed: int = 0,
 
 EXIT_CODES_TEXT = """exit codes:
   0   done
-  2   unusable arguments (the bag exists; a bad size, seed, focal length, rate or zoom)
+  2   unusable arguments (the bag exists; a bad size, seed, frame or object count, focal
+      length, rate or zoom)
       or the bag cannot be written; nothing is written
   130 interrupted (Ctrl-C); the partial bag is left behind"""
 
@@ -100,7 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="fcop_make_bag", description=__doc__,
                                  epilog=EXIT_CODES_TEXT, formatter_class=HelpFormatter)
     ap.add_argument("out", help="bag directory to create (must not exist)")
-    ap.add_argument("--frames", type=int, default=60, help="number of frames")
+    ap.add_argument("--frames", type=int, default=60,
+                    help=f"number of frames (1..{MAX_FRAMES})")
     ap.add_argument("--rate", type=float, default=30.0, help="frames per second (stamp spacing)")
     ap.add_argument("--seed", type=int, default=0,
                     help=f"seed of the scene, its motion and its noise (0..{MAX_SEED})")
@@ -116,7 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"image width, pixels (8..{MAX_SIDE})")
     ap.add_argument("--height", type=int, default=480,
                     help=f"image height, pixels (8..{MAX_SIDE})")
-    ap.add_argument("--objects", type=int, default=5, help="objects in the scene")
+    ap.add_argument("--objects", type=int, default=5,
+                    help=f"objects in the scene (1..{MAX_OBJECTS}; as many as fit are placed)")
     ap.add_argument("--storage", default="mcap", choices=sorted(STORAGES),
                     help="rosbag2 storage plugin")
     ap.add_argument("--compression", default="zstd", choices=COMPRESSIONS,
@@ -133,10 +143,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        check_limits(args.seed, args.width, args.height, args.frames, args.objects)
         spec = SequenceSpec(args.frames, args.width, args.height, args.focal, args.zoom_frame,
                             args.zoom_focal, args.preset, args.objects)
         _stamp_step(args.rate, spec.frames, START_NS)
-        check_seed_and_size(args.seed, args.width, args.height)
     except ValueError as exc:
         print(f"fcop_make_bag: {exc}", file=sys.stderr)
         return 2

@@ -140,10 +140,7 @@ def _sections(node, prefix: str, out: list) -> None:
     for key, body in node.value:
         full = f"{prefix}{key.value}"
         if not isinstance(body, yaml.MappingNode):
-            close = [k for k in full.split("/") if k != "ros__parameters"
-                     and difflib.get_close_matches(k, ["ros__parameters"], cutoff=0.8)]
-            hint = f" (did you mean ros__parameters for {close[0]!r}?)" if close else ""
-            raise RclYamlError(f"section {full!r} is not a mapping{hint}")
+            raise RclYamlError(_outside_ros_parameters(prefix, key))
         keys = [k.value for k, _ in body.value]
         if "ros__parameters" not in keys:
             _sections(body, full.rstrip("/") + "/", out)
@@ -155,6 +152,25 @@ def _sections(node, prefix: str, out: list) -> None:
             if not isinstance(params, yaml.MappingNode):
                 raise RclYamlError(f"section {full!r}: ros__parameters is not a mapping")
             _parameters(params, full, "", out)
+
+
+_LAYOUT = "'/**:' (or the node's name), then 'ros__parameters:', then the parameters"
+
+
+def _outside_ros_parameters(prefix: str, key) -> str:
+    """The message for a value met above any ros__parameters: the section lacks it (or spells
+    it wrong), which rcl refuses."""
+    parts = prefix.rstrip("/").split("/")
+    for i, part in enumerate(parts):
+        if difflib.get_close_matches(part, ["ros__parameters"], cutoff=0.8):
+            owner = f"section {'/'.join(parts[:i])!r}" if i else "the file"
+            return f"{owner} has no ros__parameters (did you mean ros__parameters for {part!r}?)"
+    section = "/".join(parts)
+    at = f"{key.value!r} (line {key.start_mark.line + 1})"
+    if not section:
+        return f"{at} is outside any section's ros__parameters: the layout is {_LAYOUT}"
+    return (f"section {section!r} has no ros__parameters, so {at} is outside it: the layout is "
+            f"{_LAYOUT}")
 
 
 def _parameters(node, section: str, prefix: str, out: list) -> None:

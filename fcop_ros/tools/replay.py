@@ -28,21 +28,23 @@ EXIT_OK, EXIT_NOTHING, EXIT_INPUT, EXIT_DAMAGED, EXIT_OUTPUT, EXIT_INTERRUPTED =
 EXIT_CODES = {
     EXIT_OK: "done",
     EXIT_NOTHING: (
-        "no CameraInfo was published: the topics never matched or gave no evidence, or every "
-        "estimate was held back by max_uncertainty or focal_min..focal_max"
+        "no CameraInfo was published from an undamaged bag: the topics never matched or gave "
+        "no evidence, or every estimate was held back by max_uncertainty or "
+        "focal_min..focal_max"
     ),
     EXIT_INPUT: (
         "unusable input or arguments: missing bag or one that cannot be opened at all, unknown "
-        "topic, wrong type, unsupported encoding, unknown parameter name, invalid parameter "
-        "value or --params-file"
+        "topic or one without messages, wrong type, unsupported encoding, unknown parameter "
+        "name, invalid parameter value or --params-file"
     ),
     EXIT_DAMAGED: (
         "the bag is damaged: read (replayed or played) up to the damage; outputs keep what came "
-        "before"
+        "before (also when nothing was published from it)"
     ),
     EXIT_OUTPUT: (
-        "the outputs cannot be written (--out not a directory, read-only, disk full); the "
-        "message says what was lost"
+        "the outputs cannot be written (--out not a directory, read-only, disk full) or are not "
+        "a previous replay's (a user's estimates.csv, report.png or fcop_output); the message "
+        "says what was lost"
     ),
     EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
 }
@@ -201,14 +203,18 @@ def main(argv=None) -> int:
         print(f"fcop_replay: {_interrupted(args, summary)}", file=sys.stderr)
         return EXIT_INTERRUPTED
     print(summary.text())
-    if summary.frames_read and not summary.frames_estimated:
-        print(f"fcop_replay: {_nothing_published(summary)}", file=sys.stderr)
-        return EXIT_NOTHING
+    if summary.metadata_problem:
+        print(f"fcop_replay: {summary.metadata_problem}", file=sys.stderr)
+    nothing = summary.frames_read and not summary.frames_estimated
     if summary.damaged:
+        after = f"; {_nothing_published(summary)}" if nothing else ""
         print(f"fcop_replay: bag damaged: {summary.damaged}; the outputs hold the "
               f"{summary.frames_estimated} estimates of the {summary.frames_read} frames read "
-              "before", file=sys.stderr)
+              f"before{after}", file=sys.stderr)
         return EXIT_DAMAGED
+    if nothing:
+        print(f"fcop_replay: {_nothing_published(summary)}", file=sys.stderr)
+        return EXIT_NOTHING
     return EXIT_OK
 
 

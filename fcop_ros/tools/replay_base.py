@@ -1,6 +1,7 @@
 """What fcop_replay's parts share: the errors that set the exit code, the guard that turns a
-failed write into an OutputError, the check that a bag has the topics asked for, and the
-summary of an offline run (which the CSV, the report and the command line fill and read)."""
+failed write into an OutputError, the checks that a bag has the topics asked for and messages on
+them, and the summary of an offline run (which the CSV, the report and the command line fill
+and read)."""
 
 from __future__ import annotations
 
@@ -51,6 +52,14 @@ def check_topics(source: BagSource, wanted: dict) -> None:
             )
 
 
+def check_not_empty(source: BagSource, inputs: dict) -> None:
+    """inputs: {role: topic}; ReplayError naming the first input topic without a message: no
+    frame could be estimated from it, offline or played."""
+    for role, topic in inputs.items():
+        if source.counts.get(topic, 0) == 0:
+            raise ReplayError(f"{role} topic {topic!r} has no messages")
+
+
 @dataclass
 class ReplaySummary:
     """What a replay did: counts, errors against truth (percent), speed, outputs, damage,
@@ -67,6 +76,7 @@ class ReplaySummary:
     csv_rows: int = 0
     held_back: int = 0  # frames estimated whose focal the publish gate held back
     held_reason: str = ""  # the gate's word on the last of them
+    metadata_problem: str = ""  # the bag's metadata.yaml unreadable, its .mcap files read
 
     @property
     def fps(self) -> float:

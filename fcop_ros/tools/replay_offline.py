@@ -10,18 +10,19 @@ from pathlib import Path
 from ..ros.dds import use_large_image_profile
 from ..ros.spin import spin_until as spin
 from .bagio import BagError, BagSource, BagWriter, error_text, not_a_bag_of, remove_bag
-from .estimates_csv import EstimatesCsv
+from .estimates_csv import EstimatesCsv, not_an_estimates_csv
 from .replay_base import (
     IMAGE_TYPE,
     INFO_TYPE,
     OutputError,
     ReplayError,
     ReplaySummary,
+    check_not_empty,
     check_topics,
     writing,
 )
 from .replay_params import node_parameters
-from .report import write_report
+from .report import not_a_report, write_report
 
 NODE_NAMESPACE = "/fcop"
 
@@ -83,16 +84,21 @@ def _not_the_input(bag, out_dir) -> None:
 
 
 def _prepare_out(out_dir) -> Path:
-    """Create --out (a directory) after checking that its fcop_output, if any, is a previous
-    output bag; OutputError if impossible."""
+    """Create --out (a directory) after checking that its fcop_output, estimates.csv and
+    report.png, if any, are a previous replay's; OutputError if impossible or not."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise OutputError(f"--out {out} exists and is not a directory")
-    out_bag = out / "fcop_output"
-    why = not_a_bag_of(out_bag, NODE_NAMESPACE + "/")
-    if why:
-        raise OutputError(f"{out_bag} exists and is not an output bag of fcop_replay ({why}): "
-                          "move it away or choose another --out")
+    judges = {
+        "fcop_output": ("an output bag", lambda path: not_a_bag_of(path, NODE_NAMESPACE + "/")),
+        "estimates.csv": ("an estimates.csv", not_an_estimates_csv),
+        "report.png": ("a report", not_a_report),
+    }
+    for name, (what, judge) in judges.items():
+        why = judge(out / name)
+        if why:
+            raise OutputError(f"{out / name} exists and is not {what} of fcop_replay ({why}): "
+                              "move it away or choose another --out")
     with writing(f"--out {out}"):
         out.mkdir(parents=True, exist_ok=True)
     return out
@@ -161,14 +167,14 @@ def replay(
 
     inputs = {"depth": depth_topic, "nocs": nocs_topic, "mask": mask_topic}
     source = BagSource(bag)
+    summary.metadata_problem = source.metadata_problem
     wanted = {role: (t, IMAGE_TYPE) for role, t in inputs.items()}
     if truth_topic is not None:
         wanted["truth"] = (truth_topic, INFO_TYPE)
     try:
         check_topics(source, wanted)
-        total = source.counts.get(depth_topic, 0)
-        if total == 0:
-            raise ReplayError(f"depth topic {depth_topic!r} has no messages")
+        check_not_empty(source, inputs)
+        total = source.counts[depth_topic]
         _check_encodings(source, inputs, lambda raw: deserialize_message(raw, Image))
         _not_the_input(bag, out_dir)
         # Only now is --out touched: the CSV first, so an unwritable one keeps the previous

@@ -3,13 +3,15 @@ on /clock, as `ros2 bag play --clock` would, for a live node."""
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from dataclasses import dataclass
 
 from ..ros.dds import use_large_image_profile
+from ..ros.topics import INPUTS
 from .bagio import BagSource
-from .replay_base import IMAGE_TYPE, ReplayError, check_topics
+from .replay_base import IMAGE_TYPE, ReplayError, check_not_empty, check_topics
 
 
 @dataclass
@@ -54,6 +56,16 @@ def _wait_for_subscribers(node, pubs: dict, seconds: float, stop, say) -> tuple:
     return left
 
 
+def _check_numbers(rate: float, clock_hz: float, wait_subscribers: float) -> None:
+    """ReplayError for a number play cannot use: nan or infinity (a nan --clock-hz was taken
+    and ticked at an undefined rate), or out of its range."""
+    for option, value, positive in (("--rate", rate, True), ("--clock-hz", clock_hz, False),
+                                    ("--wait-subscribers", wait_subscribers, False)):
+        if not (math.isfinite(value) and (value > 0 if positive else value >= 0)):
+            raise ReplayError(f"{option} must be a finite number {'> 0' if positive else '>= 0'}"
+                              f", got {value:g}")
+
+
 def _readable(source: BagSource, topics):
     """The bag's messages up to the first damage (then ``source.damaged`` says what it was)."""
     it = source.messages(topics)
@@ -82,18 +94,21 @@ def play(
     wait_subscribers: float = 5.0,
     say=None,
 ) -> PlayResult:
-    """Publish the bag's messages of ``image_topics`` with the recorded timing scaled by ``rate``.
+    """Publish the bag's messages of ``image_topics`` (the depth, NOCS and mask topics, in that
+    order: errors name them so) with the recorded timing scaled by ``rate``.
 
     With ``clock`` the bag's time goes out on /clock (rosgraph_msgs/Clock), as `ros2 bag play
     --clock` does: the recorded time of every message just before it, and in between at
     ``clock_hz`` (0: only at the messages), so nodes with use_sim_time follow the bag. ``context``
     is an initialised rclpy Context (default: the global one, initialised here); ``stop`` ends
-    playback early. A damaged bag is played up to the damage (``PlayResult.damaged``).
+    playback early. A damaged bag is played up to the damage (``PlayResult.damaged``); with
+    ``loop``, over and over up to it, which ``say`` is told once.
 
     Before the first message it waits, spinning, up to ``wait_subscribers`` seconds (0: not at
     all) until each image topic has a subscriber, so a live node that is still being discovered
     does not lose the first frames; ``say`` (a function of one line) is told what it waits for
-    and how the wait ended (``PlayResult.no_subscriber``: the topics still without one)."""
+    and how the wait ended (``PlayResult.no_subscriber``: the topics still without one), and
+    of an unreadable metadata.yaml whose .mcap files are played without it."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from rclpy.impl.implementation_singleton import rclpy_implementation
@@ -103,20 +118,18 @@ def play(
 
     from msg_adapters import time_from_ns
 
-    if not rate > 0:
-        raise ReplayError("--rate must be > 0")
-    if clock_hz < 0:
-        raise ReplayError("--clock-hz must be >= 0")
-    if not wait_subscribers >= 0:
-        raise ReplayError("--wait-subscribers must be >= 0")
+    _check_numbers(rate, clock_hz, wait_subscribers)
+    say = say or (lambda line: None)
+    inputs = dict(zip(INPUTS, image_topics, strict=True))
     source = BagSource(bag)
     try:
-        check_topics(
-            source, {f"image {i + 1}": (t, IMAGE_TYPE) for i, t in enumerate(image_topics)}
-        )
+        check_topics(source, {role: (t, IMAGE_TYPE) for role, t in inputs.items()})
+        check_not_empty(source, inputs)
     except ReplayError:
         source.close()
         raise
+    if source.metadata_problem:
+        say(source.metadata_problem)
     own = context is None
     if own:
         use_large_image_profile()
@@ -158,11 +171,9 @@ def play(
 
     try:
         if wait_subscribers > 0:
-            result.no_subscriber = _wait_for_subscribers(
-                node, pubs, wait_subscribers, stop, say or (lambda line: None)
-            )
+            result.no_subscriber = _wait_for_subscribers(node, pubs, wait_subscribers, stop, say)
         while not stop.is_set():
-            start_wall, start_bag = None, None
+            start_wall, start_bag, before = None, None, result.published
             last_clock[0] = None  # a loop starts the bag's time over, as rosbag2 does
             for topic, ts, raw in _readable(source, image_topics):
                 if stop.is_set():
@@ -177,6 +188,9 @@ def play(
                     tick(ts)
                 pubs[topic].publish(raw)
                 result.published += 1
+            if loop and source.damaged and not result.damaged and not stop.is_set():
+                say(f"bag damaged ({source.damaged}); looping over the "
+                    f"{result.published - before} messages before the damage")
             result.damaged = source.damaged
             if not loop or start_wall is None:
                 break

@@ -10,6 +10,31 @@ import numpy as np
 from .replay_base import ReplaySummary
 
 
+# What savefig puts first in a PNG: the signature, IHDR, then matplotlib's Software tag.
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_MATPLOTLIB_TAG = b"tEXtSoftware\x00Matplotlib"
+
+
+def not_a_report(path: Path) -> str:
+    """Why ``path`` is not a report.png a replay could have written ('' when it is, or is
+    empty or absent): a PNG with matplotlib's Software tag. A replay replaces its own report,
+    never a user's image of that name."""
+    if not path.exists():
+        return ""
+    if path.is_dir():
+        return "a directory"
+    if not path.is_file():  # a device or a pipe (a link to /dev/null): nothing stored is lost
+        return ""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(256)
+    except OSError as exc:
+        return f"unreadable: {exc.strerror or exc}"
+    if not head or (head.startswith(_PNG_SIGNATURE) and _MATPLOTLIB_TAG in head):
+        return ""
+    return "a PNG matplotlib did not write" if head.startswith(_PNG_SIGNATURE) else "not a PNG"
+
+
 def write_report(path: Path, rows, summary: ReplaySummary) -> None:
     """report.png: the published focal estimate over time with its ±2σ band (σ = the window's
     relative standard error std_rel) and the truth; below, the signed error against the truth."""
