@@ -155,13 +155,13 @@ def main() -> None:
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
 
-    import fcop_ros.ros.node as node_module
+    import fcop_ros.ros.frame_estimate as frame_estimate_module
     from fcop_ros.ros.node import FcopNode
     from fcop_ros.synthetic import apply_noise, render_scene
     from msg_adapters import stamp_ns
 
     # The CPU time of estimate_focal alone, measured in the thread that runs it.
-    real_estimate = node_module.estimate_focal
+    real_estimate = frame_estimate_module.estimate_focal
     est_cpu: list = []
 
     def timed_estimate(*a, **k):
@@ -172,7 +172,7 @@ def main() -> None:
             return real_estimate(*a, **k)
         finally:
             est_cpu.append(time.thread_time() - c0)
-    node_module.estimate_focal = timed_estimate
+    frame_estimate_module.estimate_focal = timed_estimate
 
     frames = [apply_noise(render_scene(np.random.default_rng(k), 5, 600.0), "moderate",
                           np.random.default_rng(k))
