@@ -7,7 +7,7 @@ import csv
 import math
 from pathlib import Path
 
-from .replay_base import ReplaySummary, writing
+from .replay_base import ReplaySummary, output_head, writing
 
 CSV_COLUMNS = ["stamp_ns", "focal", "cx", "cy", "support", "std_rel", "objects"]
 TRUTH_COLUMNS = ["focal_true", "focal_error_pct"]
@@ -18,17 +18,10 @@ def not_an_estimates_csv(path: Path) -> str:
     """Why ``path`` is not an estimates.csv a replay wrote ('' when it is, or is empty or
     absent): a replay replaces its own table, never a user's file of that name (a user's
     o/estimates.csv was overwritten). Judged by its header, which every replay writes first."""
-    if not path.exists():
-        return ""
-    if path.is_dir():
-        return "a directory"
-    if not path.is_file():  # a device or a pipe (a link to /dev/null): nothing stored is lost
-        return ""
-    try:
-        with open(path, "rb") as fh:
-            first = fh.readline(1024)
-    except OSError as exc:
-        return f"unreadable: {exc.strerror or exc}"
+    first, why = output_head(path, 1024)
+    if first is None:
+        return why
+    first = first.split(b"\n", 1)[0]
     header = first.rstrip(b"\r\n").decode("utf-8", "replace")
     if not first or header in _HEADERS:
         return ""

@@ -38,6 +38,24 @@ def writing(what):
         raise OutputError(f"cannot write {what}: {reason}") from exc
 
 
+def output_head(path, size: int):
+    """The first ``size`` bytes of an output file a replay is about to replace, to judge whether
+    it wrote it: (bytes, '') for a regular file, (None, '') when nothing stored can be lost (the
+    path is absent, or a device or a pipe such as a link to /dev/null), (None, why) when it
+    cannot be judged (a directory, unreadable)."""
+    if not path.exists():
+        return None, ""
+    if path.is_dir():
+        return None, "a directory"
+    if not path.is_file():
+        return None, ""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(size), ""
+    except OSError as exc:
+        return None, f"unreadable: {exc.strerror or exc}"
+
+
 def check_topics(source: BagSource, wanted: dict) -> None:
     """wanted: {role: (topic, expected type)}; raise ReplayError naming what the bag has
     instead."""

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .replay_base import ReplaySummary
+from .replay_base import ReplaySummary, output_head
 
 
 # What savefig puts first in a PNG: the signature, IHDR, then matplotlib's Software tag.
@@ -19,17 +19,9 @@ def not_a_report(path: Path) -> str:
     """Why ``path`` is not a report.png a replay could have written ('' when it is, or is
     empty or absent): a PNG with matplotlib's Software tag. A replay replaces its own report,
     never a user's image of that name."""
-    if not path.exists():
-        return ""
-    if path.is_dir():
-        return "a directory"
-    if not path.is_file():  # a device or a pipe (a link to /dev/null): nothing stored is lost
-        return ""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(256)
-    except OSError as exc:
-        return f"unreadable: {exc.strerror or exc}"
+    head, why = output_head(path, 256)
+    if head is None:
+        return why
     if not head or (head.startswith(_PNG_SIGNATURE) and _MATPLOTLIB_TAG in head):
         return ""
     return "a PNG matplotlib did not write" if head.startswith(_PNG_SIGNATURE) else "not a PNG"
