@@ -92,17 +92,19 @@ def test_shipped_params_file_applies_to_the_installed_node_under_a_namespace(tmp
 
 # ----- camera_info_in (issue 10.3)
 
-def driver_info(width=640, height=480, d=(0.1, -0.05, 0.001, 0.002, 0.0), cx=330.25, cy=228.75):
+def driver_info(width=640, height=480, d=(0.1, -0.05, 0.001, 0.002, 0.0), cx=330.25, cy=228.75,
+                tx=0.0):
+    """A driver's CameraInfo: the raw camera in K, D and R, the rectified one in P (principal
+    point (cx, cy), P[0, 3] = tx), as REP-104 has it; its focal lengths are wrong."""
     msg = CameraInfo()
     msg.header.frame_id = "camera_optical_frame"
     msg.width, msg.height = width, height
     msg.distortion_model = "plumb_bob"
     msg.d = list(d)
-    # the driver's focal is wrong: replaced
-    msg.k = [500.0, 0.0, cx, 0.0, 500.0, cy, 0.0, 0.0, 1.0]
+    msg.k = [505.0, 0.0, cx + 3.0, 0.0, 505.0, cy - 2.0, 0.0, 0.0, 1.0]
     c, s = np.cos(0.01), np.sin(0.01)
     msg.r = [c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0]
-    msg.p = [500.0, 0.0, cx, 0.0, 0.0, 500.0, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+    msg.p = [500.0, 0.0, cx, tx, 0.0, 500.0, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
     return msg
 
 
@@ -115,9 +117,12 @@ def send_driver_info(h, msg):
     return pub
 
 
-def test_camera_info_in_is_carried_through(harness, capfd):
+def test_camera_info_in_gives_the_rectified_cameras_principal_point_and_baseline(harness, capfd):
+    """A hostile review: the output took cx, cy from K (the raw camera's) and kept D and R,
+    so a consumer of the rectified images read a principal point off by (3, -2) px and would
+    undistort them again. REP-104: P describes the rectified images (image_geometry reads it)."""
     h = harness()
-    drv = driver_info()
+    drv = driver_info(tx=-0.06 * 500.0)  # the right camera of a pair 6 cm apart
     pub = send_driver_info(h, drv)
     fr = cam(0)
     assert h.frame(frame_messages(fr, T0))
@@ -127,28 +132,32 @@ def test_camera_info_in_is_carried_through(harness, capfd):
         f = out.k[0]
         assert abs(f / 600.0 - 1) < 0.01  # the estimate, not the driver's 500
         assert list(out.k) == [f, 0.0, 330.25, 0.0, f, 228.75, 0.0, 0.0, 1.0]
-        assert list(out.p) == [f, 0.0, 330.25, 0.0, 0.0, f, 228.75, 0.0, 0.0, 0.0, 1.0, 0.0]
-        assert out.distortion_model == "plumb_bob" and list(out.d) == list(drv.d)
-        assert np.allclose(out.r, drv.r) and (out.width, out.height) == (640, 480)
+        assert list(out.p) == pytest.approx(
+            [f, 0.0, 330.25, -0.06 * f, 0.0, f, 228.75, 0.0, 0.0, 0.0, 1.0, 0.0], rel=1e-12)
+        assert out.distortion_model == "plumb_bob" and list(out.d) == [0.0] * 5
+        assert list(out.r) == [1, 0, 0, 0, 1, 0, 0, 0, 1] and (out.width, out.height) == (640, 480)
     # The principal point parameters still win.
     assert h.node.set_parameters([Parameter("principal_point_x", value=300.0)])[0].successful
     assert h.frame(frame_messages(cam(2), T0 + 2 * DT))
     assert spin_until(h.ex, lambda: len(h.info) == 3, 10)
     assert h.info.msgs[-1].k[2] == 300.0 and h.info.msgs[-1].k[5] == 228.75
-    # Non-zero D is warned about once, however many camera_info messages come.
+    # A raw camera's D and R are warned about once, however many camera_info messages come.
     drv.header.stamp.sec = 7
     pub.publish(drv)
     assert spin_until(h.ex, lambda: h.node._cam_in.header.stamp.sec == 7, 10)
-    assert capfd.readouterr().err.count("camera_info_in has non-zero distortion") == 1
+    err = capfd.readouterr().err
+    assert err.count("camera_info_in describes a raw camera (distortion plumb_bob D=") == 1
+    assert "and rectification R=" in err
 
 
 def test_camera_info_in_with_nan_is_ignored_and_counted(harness, capfd):
     """A hostile user's trial: NaN in the driver's D or R came out in /camera_info as they
-    were. Such a message is now a counted drop, and the last good one stays in use."""
+    were. Such a message (NaN in D, R or P) is a counted drop, and the last good one stays in
+    use."""
     h = harness()
     drv = driver_info()
     pub = send_driver_info(h, drv)
-    for n, field in enumerate(("d", "r"), 1):
+    for n, field in enumerate(("d", "r", "p"), 1):
         bad = driver_info()
         setattr(bad, field, [float("nan")] * len(getattr(bad, field)))
         pub.publish(bad)
@@ -157,8 +166,10 @@ def test_camera_info_in_with_nan_is_ignored_and_counted(harness, capfd):
     assert h.frame(frame_messages(cam(0), T0))
     assert spin_until(h.ex, lambda: len(h.info) == 1, 10)
     out = h.info.msgs[0]
-    assert list(out.d) == list(drv.d) and np.allclose(out.r, drv.r)
-    assert "camera_info_in message: its D hold NaN" in capfd.readouterr().err
+    assert (out.k[2], out.k[5]) == (330.25, 228.75)  # the last good message's P
+    assert all(np.isfinite(np.concatenate([out.k, out.d, out.r, out.p])))
+    err = capfd.readouterr().err
+    assert "camera_info_in message: its D hold NaN" in err and "its P hold NaN" in err
 
 
 def test_camera_info_in_of_another_size_rejects_frames(harness):
@@ -231,7 +242,7 @@ def test_save_calibration_writes_what_camera_info_manager_loads(harness, tmp_pat
     assert cal["distortion_model"] == "plumb_bob"
     assert cal["distortion_coefficients"] == {"rows": 1, "cols": 5, "data": [0.0] * 5}
     assert cal["rectification_matrix"]["rows"] == 3 and cal["rectification_matrix"]["cols"] == 3
-    assert cal["rectification_matrix"]["data"] == pytest.approx(list(driver_info().r), rel=1e-12)
+    assert cal["rectification_matrix"]["data"] == [1, 0, 0, 0, 1, 0, 0, 0, 1]
     assert cal["projection_matrix"] == {"rows": 3, "cols": 4, "data": pytest.approx(
         [focal, 0, 330.25, 0, 0, focal, 228.75, 0, 0, 0, 1, 0], rel=1e-12)}
     assert set(cal) == {"image_width", "image_height", "camera_name", "camera_matrix",

@@ -742,7 +742,7 @@ def test_principal_point_per_axis_from_parameter_then_camera_info_in_then_centre
     assert intrinsics(p, None, 640, 480) == intrinsics(p, _cam_in(), 640, 480)
     assert (intrinsics(p, None, 640, 480).cx, intrinsics(p, None, 640, 480).cy) == (319.5, 239.5)
     got = intrinsics(p, _cam_in(cx=300.0, cy=250.0), 640, 480)
-    assert (got.cx, got.cy, got.distortion_model) == (300.0, 250.0, None)
+    assert (got.cx, got.cy, got.tx_per_f) == (300.0, 250.0, 0.0)
     got = intrinsics(dict(p, principal_point_y=200.0), _cam_in(cx=300.0, cy=250.0), 640, 480)
     assert (got.cx, got.cy) == (300.0, 200.0)
 
@@ -760,20 +760,27 @@ def test_intrinsics_refused_name_their_drop_counter(params, cam, reason):
     assert err.value.reason == reason and "640x480" in str(err.value)
 
 
-def test_camera_info_keeps_the_drivers_distortion_and_a_rotation_other_than_none():
-    from fcop_ros.ros.intrinsics import camera_info_with, intrinsics
+def test_camera_info_describes_the_rectified_camera_of_camera_info_in():
+    """REP-104: K, D and R describe the raw camera, P the rectified one, which fcop_node sees.
+    Its principal point comes from P (K's when P is unset), D is zero, R the identity, and a
+    stereo camera's P[0, 3] / P[0, 0] (minus the baseline) is kept at the new focal."""
+    from fcop_ros.ros.intrinsics import camera_info_with, intrinsics, raw_camera
 
     p = {"principal_point_x": -1.0, "principal_point_y": -1.0}
     tilted = (0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
     cam = _cam_in(cx=310.0, cy=230.0, model="plumb_bob", d=(0.1, -0.2, 0, 0, 0), r=tilted)
+    cam.p = [480.0, 0.0, 305.5, -480.0 * 0.12, 0.0, 480.0, 233.5, 0.0, 0.0, 0.0, 1.0, 0.0]
     info = camera_info_with(600.0, intrinsics(p, cam, 640, 480), 640, 480, None)
-    assert list(info.k) == [600.0, 0.0, 310.0, 0.0, 600.0, 230.0, 0.0, 0.0, 1.0]
-    assert info.distortion_model == "plumb_bob" and list(info.d) == [0.1, -0.2, 0, 0, 0]
-    assert list(info.r) == list(tilted)
-    assert list(info.p) == [600.0, 0.0, 310.0, 0.0, 0.0, 600.0, 230.0, 0.0, 0.0, 0.0, 1.0, 0.0]
-    zero_r = _cam_in(model="plumb_bob", d=(0,) * 5, r=(0,) * 9)  # an unset R: identity
-    info = camera_info_with(600.0, intrinsics(p, zero_r, 640, 480), 640, 480, None)
+    assert list(info.k) == [600.0, 0.0, 305.5, 0.0, 600.0, 233.5, 0.0, 0.0, 1.0]
+    assert info.distortion_model == "plumb_bob" and list(info.d) == [0.0] * 5
     assert list(info.r) == [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    assert list(info.p) == pytest.approx(
+        [600.0, 0.0, 305.5, -600.0 * 0.12, 0.0, 600.0, 233.5, 0.0, 0.0, 0.0, 1.0, 0.0])
+    assert raw_camera(cam) == ("distortion plumb_bob D=[0.1, -0.2, 0.0, 0.0, 0.0] and "
+                               "rectification R=[0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]")
+    k_only = _cam_in(cx=310.0, cy=230.0, model="plumb_bob", d=(0,) * 5, r=(0,) * 9)
+    got = intrinsics(p, k_only, 640, 480)  # a driver that fills only K: K's principal point
+    assert (got.cx, got.cy, got.tx_per_f) == (310.0, 230.0, 0.0) and raw_camera(k_only) == ""
 
 
 # ----- the publish gate

@@ -1,7 +1,9 @@
-"""The intrinsics other than f that every CameraInfo carries: the principal point from the
-parameters, else from camera_info_in's K, else the image centre (per axis), and camera_info_in's
-distortion model, D and R kept as the driver gave them. Plain logic on the node's parameters
-and a CameraInfo message; no rclpy."""
+"""The intrinsics other than f that every CameraInfo carries. fcop_node sees rectified images,
+so its output describes the rectified camera (REP-104: K, D and R are the raw camera's, P the
+rectified one's, which image_geometry reads for rectified images): the principal point from the
+parameters, else camera_info_in's P, else its K, else the image centre (per axis); no distortion,
+R the identity; a stereo camera's baseline (P's Tx / fx) kept. Plain logic on the node's
+parameters and a CameraInfo message; no rclpy."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -27,13 +29,35 @@ class IntrinsicsRefused(Refused):
 
 @dataclass(frozen=True)
 class Intrinsics:
-    """Principal point (px) and, when camera_info_in has a distortion model, D and R."""
+    """Principal point (px) of the rectified images and, for a stereo camera's second image,
+    ``tx_per_f``: camera_info_in's P[0, 3] / P[0, 0] (minus the baseline, metres)."""
 
     cx: float
     cy: float
-    d: tuple | None = None
-    distortion_model: str | None = None
-    r: tuple | None = None
+    tx_per_f: float = 0.0
+
+
+def _principal_point_in(cam: CameraInfo | None):
+    """camera_info_in's principal point of the rectified images: P's when P is set, else K's
+    (a driver that fills only K), else None."""
+    if cam is None:
+        return None
+    if cam.p[0] != 0 and (cam.p[2] != 0 or cam.p[6] != 0):
+        return float(cam.p[2]), float(cam.p[6])
+    if cam.k[2] != 0 or cam.k[5] != 0:
+        return float(cam.k[2]), float(cam.k[5])
+    return None
+
+
+def raw_camera(cam: CameraInfo) -> str:
+    """What in camera_info_in describes a raw camera (non-zero D, R other than the identity),
+    in words for a warning; '' if nothing does."""
+    said = []
+    if any(v != 0 for v in cam.d):
+        said.append(f"distortion {cam.distortion_model} D={[float(v) for v in cam.d]}")
+    if any(cam.r) and any(abs(a - b) > 1e-9 for a, b in zip(cam.r, (1, 0, 0, 0, 1, 0, 0, 0, 1))):
+        said.append(f"rectification R={[round(float(v), 6) for v in cam.r]}")
+    return " and ".join(said)
 
 
 def intrinsics(params: dict, camera_info_in: CameraInfo | None, width: int,
@@ -47,8 +71,7 @@ def intrinsics(params: dict, camera_info_in: CameraInfo | None, width: int,
             "camera_info_size_mismatch",
             f"camera_info_in is {cam.width}x{cam.height}, the images are {width}x{height}",
         )
-    use_cam = cam is not None and (cam.k[2] != 0 or cam.k[5] != 0)
-    fallback = (cam.k[2], cam.k[5]) if use_cam else image_centre(width, height)
+    fallback = _principal_point_in(cam) or image_centre(width, height)
     cx, cy = (
         params[name] if params[name] >= 0 else default
         for name, default in zip(("principal_point_x", "principal_point_y"), fallback)
@@ -58,18 +81,15 @@ def intrinsics(params: dict, camera_info_in: CameraInfo | None, width: int,
             "principal_point_outside",
             f"principal point ({cx}, {cy}) is outside the {width}x{height} image",
         )
-    if cam is not None and cam.distortion_model:
-        return Intrinsics(float(cx), float(cy), tuple(float(v) for v in cam.d),
-                          cam.distortion_model, tuple(float(v) for v in cam.r))
-    return Intrinsics(float(cx), float(cy))
+    tx_per_f = float(cam.p[3]) / float(cam.p[0]) if cam is not None and cam.p[0] != 0 else 0.0
+    return Intrinsics(float(cx), float(cy), tx_per_f)
 
 
 def camera_info_with(focal: float, intr: Intrinsics, width: int, height: int,
                      header) -> CameraInfo:
-    """REP-104 CameraInfo at ``focal`` with these intrinsics (D, R and the model kept)."""
+    """REP-104 CameraInfo of the rectified camera at ``focal``: K = P[:, :3], no distortion,
+    R = I, and P[0, 3] = focal x ``tx_per_f`` (a stereo pair's baseline kept)."""
     info = camera_info(focal, intr.cx, intr.cy, width, height, header)
-    if intr.distortion_model is not None:
-        info.distortion_model, info.d = intr.distortion_model, list(intr.d)
-        if any(intr.r):
-            info.r = list(intr.r)
+    if intr.tx_per_f:
+        info.p[3] = float(focal) * intr.tx_per_f
     return info

@@ -43,7 +43,7 @@ from .diagnostics import DiagnosticsInput, HealthNews, RateWindow, diagnostic_st
 from .frame_estimate import estimate_frame
 from .frame_outcome import frame_outcome
 from .intake import Intake
-from .intrinsics import IntrinsicsRefused, Refused, camera_info_with, intrinsics
+from .intrinsics import IntrinsicsRefused, Refused, camera_info_with, intrinsics, raw_camera
 from .ledger import NodeLedger
 from . import node_parameters
 from .params import (
@@ -311,7 +311,7 @@ class FcopNode(Node):
         return camera_info_with(focal, intrinsics(self.p, self._cam_in, w, h), w, h, header)
 
     def _on_camera_info_in(self, msg: CameraInfo) -> None:
-        bad = [name for name, values in (("K", msg.k), ("D", msg.d), ("R", msg.r))
+        bad = [name for name, values in (("K", msg.k), ("D", msg.d), ("R", msg.r), ("P", msg.p))
                if not np.all(np.isfinite(np.asarray(values, dtype=np.float64)))]
         if bad:  # the output would carry them: keep the driver's last good message
             self._reject("camera_info_in_not_finite")
@@ -322,12 +322,13 @@ class FcopNode(Node):
             return
         with self._lock:
             self._cam_in = msg
-        if any(v != 0 for v in msg.d) and not self._warned_distortion:
+        raw = raw_camera(msg)
+        if raw and not self._warned_distortion:
             self._warned_distortion = True
             self.get_logger().warning(
-                f"fcop_node: camera_info_in has non-zero distortion ({msg.distortion_model} "
-                f"D={list(msg.d)}): fCOP assumes a pinhole camera, feed it rectified images; the "
-                "output keeps D and the model"
+                f"fcop_node: camera_info_in describes a raw camera ({raw}): fCOP assumes a "
+                "pinhole camera, so feed it rectified images; the output describes them, as "
+                "REP-104's P does (principal point from P, D zero, R the identity)"
             )
 
     # ----- input side: cheap, never waits for the estimator
