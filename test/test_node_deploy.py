@@ -216,9 +216,12 @@ def test_save_calibration_writes_what_camera_info_manager_loads(harness, tmp_pat
                                      Parameter("set_camera_info_service",
                                                value="/driver/set_camera_info")])
 
+    refuse = [False]
+
     def on_set(request, response):
         received.append(request.camera_info)
-        response.success, response.status_message = True, "stored"
+        response.success = not refuse[0]
+        response.status_message = "driver says no" if refuse[0] else "stored"
         return response
     h.tester.create_service(SetCameraInfo, "/driver/set_camera_info", on_set)
     res = h.trigger("save_calibration")
@@ -254,6 +257,15 @@ def test_save_calibration_writes_what_camera_info_manager_loads(harness, tmp_pat
         sent.width,
         sent.height,
     ) == (640, 480)
+    assert "asked /driver/set_camera_info to store it" in res.message
+    assert h.node.counts.warnings["set_camera_info_refused"] == 0
+    # A driver that refuses: the reply could not wait for it (a hostile review read 'sent to'
+    # as delivered); the refusal is logged and counted for /diagnostics.
+    refuse[0] = True
+    assert h.trigger("save_calibration").success
+    assert spin_until(h.ex, lambda: h.node.counts.warnings["set_camera_info_refused"] == 1, 10)
+    values = {kv.key: kv.value for kv in h.node.diagnostic_status().values}
+    assert values["warning_set_camera_info_refused"] == "1"
 
 
 def test_save_calibration_refuses_an_uncertain_estimate(harness, tmp_path):

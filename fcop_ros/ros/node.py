@@ -599,7 +599,8 @@ class FcopNode(Node):
                 self.set_info_client.call_async(
                     SetCameraInfo.Request(camera_info=info)
                 ).add_done_callback(self._on_set_camera_info_done)
-                response.message += f"; sent to {self.set_info_client.srv_name}"
+                response.message += (f"; asked {self.set_info_client.srv_name} to store it (its "
+                                     "answer is logged, and a refusal counted in /diagnostics)")
             else:
                 response.message += f"; {self.set_info_client.srv_name} is not available"
         self.get_logger().info(f"fcop_node: {response.message}")
@@ -608,6 +609,8 @@ class FcopNode(Node):
     def _on_set_camera_info_done(self, future) -> None:
         res = future.result()
         if res is None or not res.success:
+            with self._lock:
+                self.ledger.warnings["set_camera_info_refused"] += 1
             self.get_logger().error(
                 f"fcop_node: {self.set_info_client.srv_name} refused the calibration: "
                 f"{getattr(res, 'status_message', 'no answer')}"
