@@ -643,11 +643,35 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             DiagnosticStatus.OK,
             "focal 600.0 px",
         ),  # busy, within max_estimate_age
+        (
+            {"input_ages": (("depth", 0.1), ("nocs", 0.1), ("mask", 0.1)),
+             "sync_dropped": 45, "dropped": {"sync_duplicate": 45}},
+            Rates(5.0, 1, 1, 0, answered=16, inputs=(16, 16, 16), drops={"sync_duplicate": 45}),
+            DiagnosticStatus.WARN,
+            "only 1 of the 16 depth messages in the last 5.0 s made a frame (45 messages "
+            "dropped as duplicates: a stamp its input had already sent (is the driver stamping",
+        ),  # a hostile review: every stamp 0; the hint asked whether NOCS or mask was silent
+        (
+            {"input_ages": (("depth", 0.1), ("nocs", 0.1), ("mask", 0.1)),
+             "sync_dropped": 60, "dropped": {"sync_queue_full": 50, "sync_duplicate": 10},
+             "queue_advice": "raise queue_size to at least 9: nocs comes 1895 ms after"},
+            Rates(5.0, 1, 1, 0, answered=16, inputs=(16, 16, 16), drops={"sync_duplicate": 10}),
+            DiagnosticStatus.WARN,
+            "(10 messages dropped as duplicates",
+        ),  # the same review: a NOCS outage's queue drops long past, judged by recent drops
     ],
 )
 def test_diagnostics_levels(reading, rates, level, words):
     got_level, message, _ = status_fields(_reading(**reading), rates)
     assert got_level == level and words in message, message
+
+
+def test_rate_window_counts_recent_drops_by_reason():
+    rw = RateWindow(5.0, start=0.0)
+    assert rw.add(1.0, 0, 0, 0, drops={"sync_queue_full": 50}).drops == {"sync_queue_full": 50}
+    rw.add(4.0, 0, 0, 0, drops={"sync_queue_full": 50})
+    r = rw.add(7.0, 0, 0, 0, drops={"sync_queue_full": 50, "sync_duplicate": 12})
+    assert r.drops == {"sync_duplicate": 12}  # the queue drops are older than the span
 
 
 def test_rate_window_spans_back_to_the_newest_reading_at_least_five_seconds_old():

@@ -72,7 +72,8 @@ class Rates:
     """Frames matched, processed and skipped over the last ``span`` seconds, and their rates;
     ``answered``: depth images given a CameraInfo in that time; ``refused``: frames the
     estimator took that gave no focal in that time (input it refused, or no evidence);
-    ``inputs``: messages of each image input in that time."""
+    ``inputs``: messages of each image input in that time; ``drops``: the synchroniser's drops
+    by reason in that time (None: not known, the totals since the start serve)."""
 
     span: float
     matched: int
@@ -81,6 +82,7 @@ class Rates:
     answered: int = 0
     refused: int = 0
     inputs: tuple = ()
+    drops: dict | None = None
 
     @property
     def frame_hz(self) -> float:
@@ -99,21 +101,27 @@ class RateWindow:
         """``start``: when the counts were zero (the node's start): the first reading's rates
         are taken since then, where they would otherwise have no span."""
         self.seconds = seconds
-        self._samples: deque = deque()  # (time, matched, processed, skipped, answered, refused)
+        # (time, matched, processed, skipped, answered, refused, inputs, drops)
+        self._samples: deque = deque()
         self._start = start
 
     def add(self, now: float, matched: int, processed: int, skipped: int,
-            answered: int = 0, refused: int = 0, inputs: tuple = ()) -> Rates:
-        inputs = tuple(inputs)
-        self._samples.append((now, matched, processed, skipped, answered, refused, inputs))
+            answered: int = 0, refused: int = 0, inputs: tuple = (),
+            drops: dict | None = None) -> Rates:
+        """``drops``: the synchroniser's drops by reason since the start (sync_* and
+        outlier_stamp_* of the node's dropped counter)."""
+        inputs, drops = tuple(inputs), dict(drops or {})
+        self._samples.append((now, matched, processed, skipped, answered, refused, inputs,
+                              drops))
         while len(self._samples) > 1 and now - self._samples[1][0] >= self.seconds:
             self._samples.popleft()
         first = self._samples[0]
         if len(self._samples) == 1 and self._start is not None and self._start < now:
-            first = (self._start, 0, 0, 0, 0, 0, (0,) * len(inputs))
-        t0, m0, p0, s0, a0, r0, i0 = first
+            first = (self._start, 0, 0, 0, 0, 0, (0,) * len(inputs), {})
+        t0, m0, p0, s0, a0, r0, i0, d0 = first
         return Rates(now - t0, matched - m0, processed - p0, skipped - s0, answered - a0,
-                     refused - r0, tuple(a - b for a, b in zip(inputs, i0)))
+                     refused - r0, tuple(a - b for a, b in zip(inputs, i0)),
+                     {k: v - d0.get(k, 0) for k, v in drops.items() if v > d0.get(k, 0)})
 
 
 def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
@@ -153,9 +161,9 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         if silent and len(silent) == len(d.input_ages):
             message += f"; {_no_input(silent)}"
         elif d.matched == 0 and d.sync_dropped > 0:
-            message += f"; no depth, NOCS and mask set has matched: {_sync_hint(d, silent)}"
+            message += f"; no depth, NOCS and mask set has matched: {_sync_hint(d, silent, rates)}"
         elif silent:
-            message += f"; {_sync_hint(d, silent)}"
+            message += f"; {_sync_hint(d, silent, rates)}"
     elif silent and len(silent) == len(d.input_ages):
         level = WARN
         message = (f"focal {win.focal:.1f} px from an estimate {d.age or 0:.1f} s old: "
@@ -172,7 +180,7 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         message = (
             f"focal {win.focal:.1f} px from an ageing estimate: {rates.answered} depth images "
             f"in the last {rates.span:.1f} s but no matched depth, NOCS and mask set "
-            f"({_sync_hint(d, silent)})"
+            f"({_sync_hint(d, silent, rates)})"
         )
     elif lost:
         level = WARN
@@ -180,7 +188,7 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         message = (
             f"focal {win.focal:.1f} px from few frames: only {rates.matched} of the {sent} "
             f"{name} messages in the last {rates.span:.1f} s made a frame "
-            f"({_sync_hint(d, silent)})"
+            f"({_sync_hint(d, silent, rates)})"
         )
     elif rates.refused >= 5 and 2 * rates.refused > rates.processed:
         level = WARN
@@ -254,16 +262,29 @@ def _slowest_lost(d: DiagnosticsInput, rates: Rates):
     return None
 
 
-def _sync_hint(d: DiagnosticsInput, silent: list) -> str:
+def _sync_hint(d: DiagnosticsInput, silent: list, rates: Rates) -> str:
     """Why depth, NOCS and mask do not match, and the parameter that answers it: an input silent
-    now (``silent``: :func:`_silent`'s), else what the synchroniser's drops (counted as dropped
-    'sync_<reason>') say."""
+    now (``silent``: :func:`_silent`'s), else what the synchroniser's most frequent recent drops
+    (counted as dropped 'sync_<reason>' and 'outlier_stamp_<input>') say."""
     if silent and len(silent) < len(d.input_ages):
         return " and ".join(f"no {name} message for {age:.1f} s" for name, age in silent) + (
             " (silent, or " + ("its topic" if len(silent) == 1 else "their topics")
             + " remapped elsewhere?)")
-    unmatched = d.dropped.get("sync_unmatched", 0)
-    full = d.dropped.get("sync_queue_full", 0)
+    recent = d.dropped if rates.drops is None else rates.drops
+    unmatched = recent.get("sync_unmatched", 0)
+    full = recent.get("sync_queue_full", 0)
+    others = {
+        "duplicate": (recent.get("sync_duplicate", 0), "dropped as duplicates: a stamp its "
+                      "input had already sent (is the driver stamping its images? each "
+                      "message needs a stamp of its own)"),
+        "late": (recent.get("sync_late", 0), "dropped as late: older than the newest matched "
+                 "frame (does an input send its messages out of order?)"),
+        "outlier": (sum(v for k, v in recent.items() if k.startswith("outlier_stamp_")),
+                    "dropped as outlier stamps, far from their input's clock (see the log)"),
+    }
+    count, words = max(others.values(), key=lambda cw: cw[0])
+    if count > max(unmatched, full):
+        return f"{count} messages {words}"
     if unmatched >= full and unmatched:
         return (f"{unmatched} messages dropped as unmatched: the inputs' stamps differ (exact "
                 "sync needs equal stamps; sync_mode approximate matches within sync_slop)")

@@ -660,8 +660,11 @@ class FcopNode(Node):
                 queue_advice=self.intake.queue_advice(),
             )
             inputs = tuple(self.intake.received)
+            no_focal = self.ledger.no_focal_frames
+        sync_drops = {k: v for k, v in reading.dropped.items()
+                      if k.startswith(("sync_", "outlier_stamp_"))}
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped,
-                                reading.camera_info_published, self.ledger.no_focal_frames, inputs)
+                                reading.camera_info_published, no_focal, inputs, sync_drops)
         return diagnostic_status(
             f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading, rates
         )
