@@ -652,7 +652,7 @@ def test_frames_refused_for_their_encoding_warn_and_name_the_newest(harness):
     assert h.node.counts.dropped["bad_encoding"] == 6
     st = h.node.diagnostic_status()
     assert st.level == DiagnosticStatus.WARN, st.message
-    assert "6 of the " in st.message and "(the newest: rejected: " in st.message
+    assert "6 of the " in st.message and "(the newest: dropped: " in st.message
     assert "32FC1" in st.message
     h.node._on_reset(Trigger.Request(), Trigger.Response())
     assert "newest" not in h.node.diagnostic_status().message

@@ -873,7 +873,7 @@ def test_ledger_counts_frames_without_a_focal_since_the_window_was_emptied():
     from fcop_ros.ros.ledger import NodeLedger
 
     led = NodeLedger(keep=2)
-    led.no_focal("bad_encoding", "rejected: " + "x" * 400)
+    led.no_focal("bad_encoding", "dropped: " + "x" * 400)
     assert len(led.newest_refusal) == 300 and led.dropped == {"bad_encoding": 1}
     kept = FrameOutcome(Counter(), Counter({"mirrored_nocs": 1}), (), True)
     for focal in (None, 600.0, 601.0):

@@ -50,7 +50,7 @@ class DiagnosticsInput:
     kernels: str = ""
     warming_up: bool = False
     focal_range: tuple = (0.0, float("inf"))
-    # Why the newest frame the estimator took gave no focal: its input refused ("rejected: ...")
+    # Why the newest frame the estimator took gave no focal: its input refused ("dropped: ...")
     # or no evidence in it; "" if it gave one.
     last_reason: str = ""
     # Frames the estimator finished since the window was last emptied (start, reset).

@@ -458,8 +458,8 @@ class FcopNode(Node):
         """Count a frame the estimator took but could not use (``reason``), log ``why`` with a
         throttle, and keep it as the newest frame's reason; returns False."""
         with self._lock:
-            self.ledger.no_focal(reason, f"rejected: {why}")
-        self._throttle.warn(reason, f"fcop_node: rejected frame: {why}")
+            self.ledger.no_focal(reason, f"dropped: {why}")
+        self._throttle.warn(reason, f"fcop_node: dropped frame: {why}")
         return False
 
     def idle(self) -> bool:
