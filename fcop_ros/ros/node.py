@@ -741,8 +741,9 @@ def main(args=None) -> int:
     finally:
         if node is not None:
             node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        # Under the context's lock: a Ctrl-C's handler may shut it down between a check and a
+        # shutdown (rcl then raised "rcl_shutdown already called" after a clean stop).
+        rclpy.try_shutdown()
     return 0
 
 

@@ -205,6 +205,6 @@ def play(
     finally:
         node.destroy_node()
         source.close()
-        if own and rclpy.ok():
-            rclpy.shutdown()
+        if own:
+            rclpy.try_shutdown()  # under the context's lock, as a Ctrl-C's handler may shut it
     return result
