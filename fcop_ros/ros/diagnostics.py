@@ -72,8 +72,8 @@ class Rates:
     """Frames matched, processed and skipped over the last ``span`` seconds, and their rates;
     ``answered``: depth images given a CameraInfo in that time; ``refused``: frames the
     estimator took that gave no focal in that time (input it refused, or no evidence);
-    ``inputs``: messages of each image input in that time; ``drops``: the synchroniser's drops
-    by reason in that time (None: not known, the totals since the start serve)."""
+    ``inputs``: messages of each image input in that time; ``drops``: the node's drops by
+    reason in that time (None: not known, the totals since the start serve)."""
 
     span: float
     matched: int
@@ -108,8 +108,7 @@ class RateWindow:
     def add(self, now: float, matched: int, processed: int, skipped: int,
             answered: int = 0, refused: int = 0, inputs: tuple = (),
             drops: dict | None = None) -> Rates:
-        """``drops``: the synchroniser's drops by reason since the start (sync_* and
-        outlier_stamp_* of the node's dropped counter)."""
+        """``drops``: the node's drops by reason since the start (its dropped counter)."""
         inputs, drops = tuple(inputs), dict(drops or {})
         self._samples.append((now, matched, processed, skipped, answered, refused, inputs,
                               drops))
@@ -273,16 +272,15 @@ def _sync_hint(d: DiagnosticsInput, silent: list, rates: Rates) -> str:
     recent = d.dropped if rates.drops is None else rates.drops
     unmatched = recent.get("sync_unmatched", 0)
     full = recent.get("sync_queue_full", 0)
-    others = {
-        "duplicate": (recent.get("sync_duplicate", 0), "dropped as duplicates: a stamp its "
-                      "input had already sent (is the driver stamping its images? each "
-                      "message needs a stamp of its own)"),
-        "late": (recent.get("sync_late", 0), "dropped as late: older than the newest matched "
-                 "frame (does an input send its messages out of order?)"),
-        "outlier": (sum(v for k, v in recent.items() if k.startswith("outlier_stamp_")),
-                    "dropped as outlier stamps, far from their input's clock (see the log)"),
-    }
-    count, words = max(others.values(), key=lambda cw: cw[0])
+    others = (
+        (recent.get("sync_duplicate", 0), "dropped as duplicates: a stamp its input had already "
+         "sent (is the driver stamping its images? each message needs a stamp of its own)"),
+        (recent.get("sync_late", 0), "dropped as late: older than the newest matched frame "
+         "(does an input send its messages out of order?)"),
+        (sum(v for k, v in recent.items() if k.startswith("outlier_stamp_")),
+         "dropped as outlier stamps, far from their input's clock (see the log)"),
+    )
+    count, words = max(others, key=lambda cw: cw[0])
     if count > max(unmatched, full):
         return f"{count} messages {words}"
     if unmatched >= full and unmatched:

@@ -17,20 +17,23 @@ class NodeLedger:
     diagnostics' ``dropped_<reason>``); ``warnings``: accepted input that deserved a word;
     ``frames_published``: processed frames whose window estimate was publishable (their poses and
     markers went out, if asked for); ``skipped``: matched frames a newer one replaced in the
-    hand-off; ``no_focal_frames``: frames the estimator took that gave no focal, refused input
-    included; ``since_empty``: frames it finished since the window was last emptied;
-    ``newest_refusal``: why the newest of them gave no focal ('' if it gave one);
-    ``processing_seconds``: the last ``keep`` estimated frames' times."""
+    hand-off (their drop count, ``estimator_busy``); ``no_focal_frames``: frames the estimator
+    took that gave no focal, refused input included; ``since_empty``: frames it finished since
+    the window was last emptied; ``newest_refusal``: why the newest of them gave no focal (''
+    if it gave one); ``processing_seconds``: the last ``keep`` estimated frames' times."""
 
     def __init__(self, keep: int = 200):
         self.dropped: Counter = Counter()
         self.warnings: Counter = Counter()
         self.frames_published = 0
-        self.skipped = 0
         self.no_focal_frames = 0
         self.since_empty = 0
         self.newest_refusal = ""
         self.processing_seconds: deque = deque(maxlen=keep)
+
+    @property
+    def skipped(self) -> int:
+        return self.dropped["estimator_busy"]
 
     def no_focal(self, reason: str, why: str) -> None:
         """A frame the estimator took but could not use (refused input, a failure): counted as

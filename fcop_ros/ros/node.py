@@ -362,7 +362,6 @@ class FcopNode(Node):
         for k, item in enumerate(sets):
             if not self.worker.put(item):
                 continue
-            self.ledger.skipped += 1
             self.ledger.dropped["estimator_busy"] += 1
             if k == 0:
                 self._throttle.warn(
@@ -661,10 +660,8 @@ class FcopNode(Node):
             )
             inputs = tuple(self.intake.received)
             no_focal = self.ledger.no_focal_frames
-        sync_drops = {k: v for k, v in reading.dropped.items()
-                      if k.startswith(("sync_", "outlier_stamp_"))}
         rates = self._rates.add(now, reading.matched, reading.processed, reading.skipped,
-                                reading.camera_info_published, no_focal, inputs, sync_drops)
+                                reading.camera_info_published, no_focal, inputs, reading.dropped)
         return diagnostic_status(
             f"{self.get_name()}: focal estimate", self.get_fully_qualified_name(), reading, rates
         )
