@@ -16,14 +16,18 @@ def inside_image(cx: float, cy: float, width: int, height: int) -> bool:
     return 0 <= cx <= width - 1 and 0 <= cy <= height - 1
 
 
+def is_number(value) -> bool:
+    """A real number and not a bool (True is no coordinate or focal length, nor is text)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
 def checked_principal_point(principal_point, width: int, height: int) -> tuple[float, float]:
     """(cx, cy) as floats, or a ValueError naming what is wrong: anything but two finite real
     numbers (not bools or text) on the image (a principal point off the image is a slip, e.g.
     (cy, cx) or a crop's)."""
     try:
         cx, cy = principal_point
-        if not all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
-                   for v in (cx, cy)):  # True is no coordinate, nor is the text "320"
+        if not (is_number(cx) and is_number(cy)):
             raise TypeError
         cx, cy = float(cx), float(cy)
     except (TypeError, ValueError):

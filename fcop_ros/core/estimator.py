@@ -13,7 +13,6 @@ the combined focal length. ``method="ransac"`` replaces stabbing by the paper's 
 from __future__ import annotations
 
 import math
-import numbers
 
 from dataclasses import dataclass, field
 
@@ -21,7 +20,7 @@ import numpy as np
 
 from . import compiled
 from .combine import combine_objects
-from .camera import checked_principal_point, image_centre
+from .camera import checked_principal_point, image_centre, is_number
 from .correspondences import (
     NOCS_TOLERANCE,
     Instance,
@@ -414,7 +413,7 @@ def estimate_poses(
     fixed focal length, all instances fitted in one batch; instances whose NOCS fit only as a
     reflection get none. ``rng`` draws the fit's pixel subsets (default: a fixed seed).
     """
-    if isinstance(focal, (bool, np.bool_)) or not isinstance(focal, numbers.Real):
+    if not is_number(focal):
         raise TypeError(f"focal must be a number of pixels, got {focal!r}")
     focal = float(focal)
     if not (np.isfinite(focal) and focal > 0):
