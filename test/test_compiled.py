@@ -99,3 +99,29 @@ def test_flatness_agrees(monkeypatch):
     fast, slow = _both_ways(monkeypatch, lambda: [_flatness(i, 600.0) for i in insts if i])
     for a, b in zip(fast, slow):
         np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9)
+
+
+def test_frame_checks_agree(monkeypatch):
+    """The one compiled pass of the frame's sampled checks (NOCS range, median object depth)
+    gives nocs_range's and _object_depth's numbers exactly, for every mask integer type (negative
+    ids are background), float32 and float64 images, NOCS out of range and invalid values."""
+    from fcop_ros.core.estimator import _frame_checks
+
+    rng = np.random.default_rng(3)
+    fr = _frames()[0]
+    cases = []
+    for dt in (np.float64, np.float32):
+        for mt in (np.uint8, np.int8, np.uint16, np.int16, np.uint32, np.int32, np.uint64,
+                   np.int64):
+            nocs, depth = fr.nocs.astype(dt), fr.depth.astype(dt)
+            nocs[rng.random(nocs.shape[:2]) < 0.05] *= 1.3
+            nocs[rng.random(nocs.shape[:2]) < 0.02] = np.nan
+            depth[rng.random(depth.shape) < 0.05] = np.nan
+            mask = fr.mask.astype(mt)
+            if np.dtype(mt).kind == "i":
+                mask[rng.random(mask.shape) < 0.01] = -3
+            cases.append((depth, nocs, mask))
+    cases.append((fr.depth, fr.nocs, np.zeros_like(fr.mask)))
+    fast, slow = _both_ways(monkeypatch, lambda: [_frame_checks(*c) for c in cases])
+    assert fast == slow
+    assert sum(r[0] > 0 for r in fast) >= 12  # out-of-range NOCS were seen (15 of 17)
