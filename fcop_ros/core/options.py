@@ -114,8 +114,8 @@ class EstimatorOptions:
     unseen_depth_error: float = 0.3
     shape_error: float = 0.1
     # The root-mean-square between-object spread (DerSimonian-Laird, at 0.005) of the tuning
-    # world's multi-object `predicted` frames: `python bench/world_accuracy.py --parts tau
-    # --set object_tau=0.005` (docs/BENCHMARKS.md).
+    # world's multi-object `predicted` frames: `python bench/world_accuracy.py --frames 200
+    # --parts tau --set object_tau=0.005` (docs/BENCHMARKS.md).
     object_tau: float = 0.066
     object_tau_weight: float = 2.0
     pose_max_std: float = 0.25

@@ -8,7 +8,7 @@ from visualization_msgs.msg import MarkerArray
 
 #: The image inputs (sensor_msgs/Image), in the order the synchroniser and every frame keep.
 INPUTS = ("depth", "nocs", "mask")
-#: The driver's CameraInfo, read for the principal point, D and R.
+#: The driver's CameraInfo: its P's principal point and baseline, its size (D, R: a warning).
 CAMERA_INFO_IN = "camera_info_in"
 #: The outputs, topic -> message type.
 OUTPUTS = {"camera_info": CameraInfo, "object_poses": PoseArray, "object_markers": MarkerArray}

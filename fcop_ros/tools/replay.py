@@ -9,8 +9,8 @@ messages on their topics with the recorded timing, as `ros2 bag play --clock` wo
 recorded time on /clock for nodes with use_sim_time.
 
 Parameters: --params-file sections keyed '/**', '/**/fcop_node', 'fcop_node' or
-'<namespace>/fcop_node' all apply (wildcard sections first, the node's own after them), then
-every -p NAME:=VALUE; unknown names and invalid values are refused before anything runs.
+'<namespace>/fcop_node' all apply, in file order as rcl applies them (a later value wins),
+then every -p NAME:=VALUE; unknown names and invalid values are refused before anything runs.
 """
 
 from __future__ import annotations
