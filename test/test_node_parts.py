@@ -109,6 +109,12 @@ def test_combination_rules():
     assert "below focal_max" in check_combination({**p, "focal_min": 30000.0})
     assert "(0, 0.5]" in check_combination({**p, "noise_bound": 0.9})
     assert check_combination({**p, "noise_bound": 0.9, "noise_bound_mode": "absolute"}) == ""
+    # Switching an absolute bound of 5 px to relative blames the switch, the parameter being set
+    absolute = {**p, "noise_bound": 5.0, "noise_bound_mode": "relative"}
+    assert check_combination(absolute, changed=("noise_bound_mode",)).startswith(
+        "parameter noise_bound_mode='relative' is not allowed: noise_bound=5 is no fraction")
+    assert check_combination(absolute, changed=("noise_bound",)).startswith(
+        "parameter noise_bound=5.0 is not allowed")
     assert check_combination({**p, "principal_point_x": 700.0}) == ""  # image size not known yet
     assert "[0, 639]" in check_combination({**p, "principal_point_x": 700.0}, (640, 480))
 

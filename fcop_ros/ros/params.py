@@ -360,6 +360,9 @@ def combination_conflict(p: dict, image_size=None, changed=()) -> tuple[str, str
             return high, f"it must be {high_rule} {low}={p[low]}"
         return low, f"it must be {low_rule} {high}={p[high]}"
     if p["noise_bound_mode"] == "relative" and not 0 < p["noise_bound"] <= MAX_RELATIVE_BOUND:
+        if "noise_bound_mode" in changed and "noise_bound" not in changed:
+            return ("noise_bound_mode", f"noise_bound={p['noise_bound']:g} is no fraction in "
+                    f"(0, {MAX_RELATIVE_BOUND}]: set noise_bound first")
         return ("noise_bound",
                 f"a fraction in (0, {MAX_RELATIVE_BOUND}] in relative noise_bound_mode")
     if image_size is not None:
