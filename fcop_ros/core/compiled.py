@@ -89,4 +89,11 @@ def warm_up() -> float:
         raise RuntimeError(f"compiled.warm_up: the warm-up frame gave no focal ({est.reason})")
     # The node's images are float32, which the correspondences kernel reads as they are.
     estimate_focal(depth.astype(np.float32), nocs.astype(np.float32), mask, seed=0)
+    # solve_triplets on its own (the RANSAC method's hypotheses): the votes kernel compiled
+    # the triplet kernel into itself, not as a signature of its own.
+    from .solver import solve_triplets
+
+    on = mask > 0
+    pixels = X[on][:, :2] * f / X[on][:, 2:]
+    solve_triplets(pixels, depth[on], nocs[on], np.arange(9).reshape(3, 3))
     return time.perf_counter() - t

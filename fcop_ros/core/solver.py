@@ -213,6 +213,40 @@ def _triplets_kernel(x, d, p, tri, base, group, shift, lo, hi, focal, scale_sq, 
     return m
 
 
+@compiled.kernel
+def _votes_kernel(x, d, p, sizes, count, rng, lo, hi):
+    """object_votes' compiled path: ``_draw``'s numbers for every object of at least three
+    points, drawn from the same generator (numba's Generator.integers gives numpy's numbers
+    and advances its state alike), then solved by _triplets_kernel; without a Python call per
+    object and array (0.18 ms of a 640x480 frame's 0.6)."""
+    nbig = 0
+    for q in range(sizes.size):
+        if sizes[q] >= 3:
+            nbig += 1
+    total = nbig * count
+    raw = np.empty((total, 3), np.intp)
+    base = np.empty(total, np.intp)
+    group = np.empty(total, np.intp)
+    start = 0
+    r = 0
+    for q in range(sizes.size):
+        n = sizes[q]
+        if n >= 3:
+            for c in range(3):  # i in [0, n), j in [0, n-1), k in [0, n-2), as _draw
+                draw = rng.integers(0, n - c, count)
+                for t in range(count):
+                    raw[r + t, c] = draw[t]
+            for t in range(count):
+                base[r + t] = start
+                group[r + t] = q
+            r += count
+        start += n
+    focal, scale_sq = np.empty(total), np.empty(total)
+    valid, owner = np.empty(total, np.bool_), np.empty(total, np.intp)
+    m = _triplets_kernel(x, d, p, raw, base, group, True, lo, hi, focal, scale_sq, valid, owner)
+    return focal[:m].copy(), owner[:m].copy()
+
+
 def sample_triplets(n: int, count: int, rng: np.random.Generator) -> np.ndarray:
     """Draw ``count`` triplets of distinct indices in [0, n) uniformly (the paper's sampling)."""
     if n < 3 or count <= 0:
@@ -247,19 +281,8 @@ def object_votes(xs, ds, ps, count: int, rng: np.random.Generator, focal_range):
     count = max(int(count), 0)
     sizes = [len(v) for v in ds]
     x, d, p = (np.ascontiguousarray(np.concatenate(v), dtype=np.float64) for v in (xs, ds, ps))
-    if compiled.ENABLED:
-        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
-        big = [o for o, n in enumerate(sizes) if n >= 3]
-        raw = np.empty((len(big) * count, 3), dtype=np.intp)
-        for b, o in enumerate(big):
-            for c, draw in enumerate(_draw(sizes[o], count, rng)):
-                raw[b * count:(b + 1) * count, c] = draw
-        group = np.repeat(np.array(big, dtype=np.intp), count)
-        focal, scale_sq = np.empty(raw.shape[0]), np.empty(raw.shape[0])
-        valid, owner = np.empty(raw.shape[0], dtype=bool), np.empty(raw.shape[0], dtype=np.intp)
-        m = _triplets_kernel(x, d, p, raw, starts[group], group, True, lo, hi, focal, scale_sq,
-                             valid, owner)
-        return focal[:m].copy(), owner[:m].copy()
+    if compiled.ENABLED and type(rng) is np.random.Generator:
+        return _votes_kernel(x, d, p, np.array(sizes, dtype=np.intp), count, rng, lo, hi)
     offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
     tri = np.concatenate([sample_triplets(n, count, rng) + off for n, off in zip(sizes, offsets)])
     owner = np.repeat(np.arange(len(sizes)), [count if n >= 3 else 0 for n in sizes])
