@@ -248,3 +248,33 @@ def test_id_pass_stops_at_a_large_id(dtype):
     assert fast[2] == slow[2]
     m[40, 50] = 17
     assert _few_ids_and_boxes_compiled(_mask_bytes(m), m.dtype, 16, 5) is None
+
+
+def test_median_and_selection_are_numpys():
+    """The kernels' median (_median_k, by _select_k's branch-free quickselect) is np.median's
+    value bit for bit, on random, sorted, constant and few-valued data of every size around the
+    bracketing threshold (256), and the selection leaves no larger value before the rank and no
+    smaller one after it."""
+    from fcop_ros.core.correspondences import _median_k, _select_k
+
+    # Compiled, as the kernels run them (called from Python, the helpers would run as Python).
+    median = compiled.numba.njit(lambda v, n: _median_k(v, n))
+    select = compiled.numba.njit(lambda v, lo, hi, k: _select_k(v, lo, hi, k))
+    rng = np.random.default_rng(23)
+    for trial in range(1500):
+        n = int(rng.integers(1, 1300))
+        kind = trial % 5
+        v = (rng.standard_normal(n) * 10.0 ** rng.integers(-6, 6) if kind == 0
+             else rng.integers(0, 2 + trial % 9, n).astype(float) if kind == 1
+             else np.sort(rng.standard_normal(n)) if kind == 2
+             else np.full(n, 0.25) if kind == 3
+             else np.sort(rng.standard_normal(n))[::-1].copy())
+        assert median(v.copy(), n) == np.median(v), (trial, n)
+        lo = int(rng.integers(0, n))
+        hi = int(rng.integers(lo, n))
+        k = int(rng.integers(lo, hi + 1))
+        w = v.copy()
+        select(w, lo, hi, k)
+        assert w[k] == np.sort(v[lo:hi + 1])[k - lo]
+        assert np.all(w[lo:k] <= w[k]) and np.all(w[k + 1:hi + 1] >= w[k])
+        assert np.array_equal(np.sort(w[lo:hi + 1]), np.sort(v[lo:hi + 1]))
