@@ -27,6 +27,7 @@ from .correspondences import (
     Instance,
     _mask_bytes,
     _mean,
+    _median_k,
     calibrated_nocs,
     check_images,
     extract_instances,
@@ -132,7 +133,7 @@ def _radius_depth_kernel(x, d):
     for r in range(n):
         u, v = x[r, 0] - m0, x[r, 1] - m1
         s += u * u + v * v
-    return np.sqrt(s / n), np.median(d)
+    return np.sqrt(s / n), (_median_k(d.copy(), d.size) if d.size else np.nan)
 
 
 def _no_instance_reason(depth, nocs, mask, opt: EstimatorOptions) -> str:

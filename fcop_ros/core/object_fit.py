@@ -25,6 +25,7 @@ import numpy as np
 
 from . import compiled
 from .compiled import kernel, kernel_helper
+from .correspondences import _median_k
 from .robust import MAD_TO_SIGMA
 
 _CAUCHY = 3.0  # robust weight 1 / (1 + (e / c)^2) of a pixel whose normalised residual is e
@@ -465,6 +466,7 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
     Ut = np.zeros((o, m, 2))
     Y = np.empty((m, 3))
     res = np.empty(m)
+    valid_res = np.empty(m)
     # The start: two orthogonal fits to the back-projection at focal0, the second with Cauchy
     # weights from the first's residuals; then the depth tilt's regressor.
     for k in range(o):
@@ -485,13 +487,10 @@ def _fit_kernel(X, D, P, n, focal0, fix_focal, iterations, depth_tilt, proper):
                                         + Q[c, 2] * P[k, i, 2]) + tk[c])
                     acc += e * e
                 res[i] = np.sqrt(acc)
-                if not np.isnan(res[i]):
+                if not np.isnan(res[i]):  # the median of the others, as np.median of them
+                    valid_res[nv] = res[i]
                     nv += 1
-            med = 0.0
-            if nv == nk:
-                med = np.median(res[:nk]) if nk > 0 else 0.0
-            elif nv > 0:
-                med = np.median(res[:nk][~np.isnan(res[:nk])])
+            med = _median_k(valid_res, nv) if nv > 0 else 0.0
             scale = max(_CAUCHY * MAD_TO_SIGMA * med, 1e-12)
             for i in range(nk):
                 W[k, i] = 1.0 / (1.0 + (res[i] / scale) ** 2)
