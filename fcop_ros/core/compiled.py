@@ -55,6 +55,18 @@ def kernel_helper(fn):
     return register_jitable(fn)
 
 
+def reassociating_helper(fn):
+    """Compile ``fn``, a sum-heavy helper that kernels call, with its floating-point sums free
+    to be reordered (LLVM's reassoc flag alone), so that the compiler splits each reduction
+    into vector lanes: the results differ from a sequential sum in the last bits, as BLAS's do.
+    A function of its own (its flags are not the caller's), compiled into each kernel that
+    calls it; like kernel_helper, not listed in KERNELS. Without numba, ``fn`` as it is."""
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, nogil=True, error_model="numpy",
+                      fastmath={"reassoc"})(fn)
+
+
 def warm_up() -> float:
     """Compile (or load from the cache) every kernel by estimating one small synthetic frame;
     returns the seconds it took. A no-op when the kernels are not used."""
