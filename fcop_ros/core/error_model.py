@@ -20,7 +20,7 @@ import numpy as np
 from . import compiled
 from .compiled import kernel
 from .correspondences import _mean
-from .object_fit import _CAUCHY, ObjectFits, _lu_factor, _lu_solve, _plain_rows
+from .object_fit import _CAUCHY, ObjectFits, _gram_k, _lu_factor, _lu_solve, _plain_rows
 
 #: The depth-error patterns, in the order of :func:`depth_influence`'s columns.
 PATTERNS = ("relief", "offset")
@@ -149,8 +149,9 @@ def _every_kth_rows_k(x_out, d_out, p_out, start, x, d, p, m):
 def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, tilt,
                       sigma_px, sigma_depth, depth_tilt):
     """:func:`depth_influence`'s numbers, one object at a time: the same pixels (every k-th),
-    predictions, robust weights and Jacobian rows, H and J_d^T W_d phi accumulated pixel by
-    pixel, and the fit's LU solve (NaN where H is exactly singular)."""
+    predictions, robust weights and Jacobian rows, H and J_d^T W_d phi by one Gram product of
+    the weighted rows (as the fit forms its normal equations), and the fit's LU solve (NaN
+    where H is exactly singular)."""
     o = offsets.size - 1
     npar = 10 if depth_tilt else 8
     out = np.full((o, 2), np.nan)
@@ -159,10 +160,9 @@ def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, 
     ws = np.empty(m)
     us = np.empty((m, 2))
     qs = np.empty((m, 3))
-    ju = np.zeros(10)
-    jv = np.zeros(10)
-    jd = np.zeros(10)
     piv = np.empty(npar, np.int64)
+    buf = np.empty(12 * 3 * m)
+    gram = np.empty(12 * 12)
     for k in range(o):
         start, n = offsets[k], offsets[k + 1] - offsets[k]
         cnt = min(n, m)
@@ -208,8 +208,11 @@ def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, 
             zs[j] = z
             zsum += z
         zm = zsum / cnt
-        H = np.zeros((10, 10))
-        G = np.zeros((10, 2))
+        # The Jacobian's rows scaled by the square roots of the rows' weights, u, v and d
+        # pixels side by side, with phi's two patterns (zero on u and v) as two more rows:
+        # one Gram product gives H and J_d^T W_d phi.
+        J = buf[:(npar + 2) * 3 * cnt].reshape((npar + 2, 3 * cnt))
+        J[:] = 0.0
         for j in range(cnt):
             qx, qy, qz = qs[j, 0], qs[j, 1], qs[j, 2]
             z = zs[j]
@@ -219,27 +222,29 @@ def _influence_kernel(x, d, p, offsets, m, focal, scale, rotation, translation, 
             uz = u / z
             vz = v / z
             g = 1.0 + us[j, 0] * tilt[k, 0] + us[j, 1] * tilt[k, 1]
-            ju[0], ju[1], ju[2] = u, a * qx - uz * qz, -uz * qy
-            ju[3], ju[4], ju[5], ju[6], ju[7] = a * qz + uz * qx, -a * qy, a, 0.0, -uz
-            jv[0], jv[1], jv[2] = v, a * qy - vz * qz, -a * qz - vz * qy
-            jv[3], jv[4], jv[5], jv[6], jv[7] = vz * qx, a * qx, 0.0, a, -vz
-            jd[0], jd[1], jd[2], jd[3], jd[4] = 0.0, g * qz, g * qy, -g * qx, 0.0
-            jd[5], jd[6], jd[7], jd[8], jd[9] = 0.0, 0.0, g, z * us[j, 0], z * us[j, 1]
-            wu = ws[j] / (sp * sp)
-            wd = ws[j] / (sd * sd)
-            for r in range(npar):
-                for c in range(r, npar):
-                    H[r, c] += wu * (ju[r] * ju[c] + jv[r] * jv[c]) + wd * jd[r] * jd[c]
-                G[r, 0] += wd * jd[r] * (z - zm)
-                G[r, 1] += wd * jd[r]
-        for r in range(npar):
-            for c in range(r):
-                H[r, c] = H[c, r]
-        A = H[:npar, :npar].copy()
+            su = np.sqrt(ws[j]) / sp
+            sw = np.sqrt(ws[j]) / sd
+            cu, cv, cd = j, cnt + j, 2 * cnt + j
+            # Columns: log f, log s, w (3), t (3), [tilt (2)]; u has no t_y, v no t_x.
+            J[0, cu], J[1, cu], J[2, cu] = u * su, (a * qx - uz * qz) * su, -uz * qy * su
+            J[3, cu], J[4, cu], J[5, cu] = (a * qz + uz * qx) * su, -a * qy * su, a * su
+            J[7, cu] = -uz * su
+            J[0, cv], J[1, cv] = v * su, (a * qy - vz * qz) * su
+            J[2, cv], J[3, cv] = (-a * qz - vz * qy) * su, vz * qx * su
+            J[4, cv], J[6, cv], J[7, cv] = a * qx * su, a * su, -vz * su
+            J[1, cd], J[2, cd], J[3, cd] = g * qz * sw, g * qy * sw, -g * qx * sw
+            J[7, cd] = g * sw
+            if npar == 10:
+                J[8, cd], J[9, cd] = z * us[j, 0] * sw, z * us[j, 1] * sw
+            J[npar, cd] = (z - zm) * sw
+            J[npar + 1, cd] = sw
+        M = gram[:(npar + 2) * (npar + 2)].reshape((npar + 2, npar + 2))
+        _gram_k(J, M)
+        A = M[:npar, :npar].copy()
         if not _lu_factor(A, piv):
             continue
         for col in range(2):
-            b = G[:npar, col].copy()
+            b = M[:npar, npar + col].copy()
             _lu_solve(A, piv, b)
             out[k, col] = b[0]
     return out
