@@ -47,6 +47,38 @@ def rss_mb() -> float:
     return float("nan")
 
 
+class FrameTimes:
+    """Values recorded once per frame (thread CPU seconds) into an array allocated up front: a
+    list that grew by a float per frame was the benchmark's own memory growth (65 bytes per
+    estimated frame, two of them), read as the node's. Past ``size`` values are counted, not
+    kept."""
+
+    def __init__(self, size: int):
+        self._values = np.full(size, np.nan)
+        self.n = 0  # values offered
+
+    def add(self, value: float) -> None:
+        if self.n < len(self._values):
+            self._values[self.n] = value
+        self.n += 1
+
+    def array(self) -> np.ndarray:
+        return self._values[: min(self.n, len(self._values))]
+
+
+def thread_timed(fn, record: FrameTimes, before=None):
+    """``fn`` recording each call's thread CPU time in ``record`` (``before()`` first, timed)."""
+    def timed(*a, **k):
+        c0 = time.thread_time()
+        if before is not None:
+            before()
+        try:
+            return fn(*a, **k)
+        finally:
+            record.add(time.thread_time() - c0)
+    return timed
+
+
 def frame_messages(frame):
     """Depth (32FC1), NOCS (32FC3) and mask (mono8) Image messages of a rendered frame."""
     from std_msgs.msg import Header
@@ -161,18 +193,10 @@ def main() -> None:
     from msg_adapters import stamp_ns
 
     # The CPU time of estimate_focal alone, measured in the thread that runs it.
-    real_estimate = frame_estimate_module.estimate_focal
-    est_cpu: list = []
-
-    def timed_estimate(*a, **k):
-        c0 = time.thread_time()
-        if args.slow_ms > 0:
-            time.sleep(args.slow_ms / 1000)
-        try:
-            return real_estimate(*a, **k)
-        finally:
-            est_cpu.append(time.thread_time() - c0)
-    frame_estimate_module.estimate_focal = timed_estimate
+    est_cpu = FrameTimes(total)
+    frame_estimate_module.estimate_focal = thread_timed(
+        frame_estimate_module.estimate_focal, est_cpu,
+        (lambda: time.sleep(args.slow_ms / 1000)) if args.slow_ms > 0 else None)
 
     frames = [apply_noise(render_scene(np.random.default_rng(k), 5, 600.0), "moderate",
                           np.random.default_rng(k))
@@ -215,15 +239,8 @@ def main() -> None:
             info_pub(msg)
         node.pub_info.publish = publish_info_timed
         # Thread CPU time of each frame the estimator thread handles.
-        process, proc_cpu = node.process, []
-
-        def process_timed(*a, **k):
-            c0 = time.thread_time()
-            try:
-                return process(*a, **k)
-            finally:
-                proc_cpu.append(time.thread_time() - c0)
-        node.process = process_timed
+        proc_cpu = FrameTimes(total)
+        node.process = thread_timed(node.process, proc_cpu)
 
         tester = Node("bench", context=ctx)
         pubs = [
@@ -335,7 +352,7 @@ def main() -> None:
                   f"{ms_stats(far_depth[:n] - sent[:n])}")
         print(f"  latency depth published -> poses of the frame (estimated frames): "
               f"{ms_stats(posed[:n] - sent[:n])}")
-        pc, ec = np.array(proc_cpu) * 1000, np.array(est_cpu) * 1000
+        pc, ec = proc_cpu.array() * 1000, est_cpu.array() * 1000
         if not (pc.size and ec.size):
             raise SystemExit("bench_node: the estimator finished no frame during the run")
         print(

@@ -20,3 +20,35 @@ def test_bench_node_runs_and_reports_the_estimator():
     # The first depth images come before the window has an estimate (measured: 29 of 40).
     assert got and got.group(2) == "40" and int(got.group(1)) >= 20, out.stdout[-2000:]
     assert "estimate_focal alone: median" in out.stdout, out.stdout[-2000:]
+
+
+def test_bench_node_per_frame_records_do_not_grow():
+    """The CPU times the benchmark records per estimated frame go into arrays allocated before
+    the run: lists that gained a float per frame were the 65 bytes per frame of resident-memory
+    growth its 10,000-frame run reported as the node's (tracemalloc: bench_node.py, 32 bytes
+    per frame for each of its two records, nothing of the node's growing)."""
+    import importlib.util
+    import tracemalloc
+
+    path = os.path.join(ROOT, "bench", "bench_node.py")
+    spec = importlib.util.spec_from_file_location("bench_node_under_test", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    record = bench.FrameTimes(3000)
+    timed = bench.thread_timed(lambda x: x + 1, record)
+    assert timed(1) == 2
+    tracemalloc.start()
+    try:
+        before = tracemalloc.take_snapshot()
+        for k in range(2999):
+            timed(k)
+        after = tracemalloc.take_snapshot()
+    finally:
+        tracemalloc.stop()
+    mine = [tracemalloc.Filter(True, path)]
+    grown = sum(s.size_diff for s in after.filter_traces(mine).compare_to(
+        before.filter_traces(mine), "filename"))
+    assert grown < 1000, grown  # a list: ~96 kB for these 2999 calls
+    assert len(record.array()) == 3000 and (record.array() >= 0).all()
+    timed(0)  # past the size: counted, not kept
+    assert record.n == 3001 and len(record.array()) == 3000
