@@ -118,6 +118,7 @@ def test_frame_checks_agree(monkeypatch):
             nocs[rng.random(nocs.shape[:2]) < 0.02] = np.nan
             depth[rng.random(depth.shape) < 0.05] = np.nan
             mask = fr.mask.astype(mt)
+            mask[rng.random(mask.shape) < 0.01] = 100  # an id with bit 6 set (int8: 0x64)
             if np.dtype(mt).kind == "i":
                 mask[rng.random(mask.shape) < 0.01] = -3
             cases.append((depth, nocs, mask))

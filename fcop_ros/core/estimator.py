@@ -171,9 +171,8 @@ def _frame_checks(depth, nocs, mask):
             and depth.dtype in (np.float32, np.float64)):
         return (*nocs_range(nocs, mask), _object_depth(depth, mask))
     kind = nocs.dtype.type  # nocs_range compares in the image's type (NEP 50)
-    itemsize = mask.dtype.itemsize
     n_pred, n_out, low, high, level, n_depth = _frame_checks_kernel(
-        _mask_bytes(mask), itemsize, mask.dtype.kind == "i", depth, nocs, _CHECK_STRIDE,
+        _mask_bytes(mask), mask.dtype.itemsize, mask.dtype.kind == "i", depth, nocs, _CHECK_STRIDE,
         kind(-NOCS_TOLERANCE), kind(1 + NOCS_TOLERANCE))
     share = (0.0, 0, 0.0, 0.0) if n_pred == 0 else (n_out / n_pred, int(n_pred), float(low),
                                                       float(high))
@@ -183,20 +182,31 @@ def _frame_checks(depth, nocs, mask):
 _CHECK_STRIDE = 8  # nocs_range's and _object_depth's sampling: every 8th row and column
 
 
-@compiled.kernel_helper
-def _frame_checks_k(m, signed, negative, depth, nocs, stride, lo_b, hi_b, dbuf):
-    """_frame_checks_kernel on the mask's values ``m``, read as unsigned: a value is an
-    object's id unless it is 0 or, of a ``signed`` type, at least ``negative`` (its sign bit)."""
-    h, w = m.shape
+@compiled.kernel
+def _frame_checks_kernel(raw, itemsize, signed, depth, nocs, stride, lo_b, hi_b):
+    """(NOCS predictions sampled, how many out of [lo_b, hi_b], their smallest and largest
+    value, the median sampled depth, the depths sampled): nocs_range and _object_depth on the
+    object pixels of every ``stride``-th row and column of the mask's bytes ``raw``
+    (``_mask_bytes`` of a little-endian mask: one signature for every integer type). A pixel is
+    an object's if any of its bytes is set and, of a ``signed`` type, not its sign bit."""
+    h = raw.shape[0]
+    w = raw.shape[1] // itemsize
+    dbuf = np.empty(((h + stride - 1) // stride) * ((w + stride - 1) // stride), depth.dtype)
     n_pred = 0
     n_out = 0
     n_depth = 0
     low = np.inf
     high = -np.inf
     for y in range(0, h, stride):
+        row = raw[y]
         for x in range(0, w, stride):
-            v = m[y, x]
-            if v == 0 or (signed and v >= negative):
+            at = x * itemsize
+            if signed and row[at + itemsize - 1] & 0x80:  # a negative id: background
+                continue
+            nonzero = False
+            for q in range(itemsize):
+                nonzero |= row[at + q] != 0
+            if not nonzero:
                 continue
             d = depth[y, x]
             if np.isfinite(d) and d > 0:
@@ -211,31 +221,6 @@ def _frame_checks_k(m, signed, negative, depth, nocs, stride, lo_b, hi_b, dbuf):
             n_out += (lo < lo_b) | (hi > hi_b)
             low = min(low, lo)
             high = max(high, hi)
-    return n_pred, n_out, low, high, n_depth
-
-
-@compiled.kernel
-def _frame_checks_kernel(raw, itemsize, signed, depth, nocs, stride, lo_b, hi_b):
-    """(NOCS predictions sampled, how many out of [lo_b, hi_b], their smallest and largest
-    value, the median sampled depth, the depths sampled): nocs_range and _object_depth on the
-    object pixels of every ``stride``-th row and column of the mask's bytes ``raw``
-    (``_mask_bytes``: one signature for every integer type)."""
-    h = raw.shape[0]
-    w = raw.shape[1] // itemsize
-    dbuf = np.empty(((h + stride - 1) // stride) * ((w + stride - 1) // stride), depth.dtype)
-    if itemsize == 1:
-        r = _frame_checks_k(raw, signed, np.uint8(0x80), depth, nocs, stride, lo_b, hi_b,
-                            dbuf)
-    elif itemsize == 2:
-        r = _frame_checks_k(raw.view(np.uint16), signed, np.uint16(0x8000), depth, nocs,
-                            stride, lo_b, hi_b, dbuf)
-    elif itemsize == 4:
-        r = _frame_checks_k(raw.view(np.uint32), signed, np.uint32(0x80000000), depth, nocs,
-                            stride, lo_b, hi_b, dbuf)
-    else:
-        r = _frame_checks_k(raw.view(np.uint64), signed, np.uint64(0x8000000000000000), depth,
-                            nocs, stride, lo_b, hi_b, dbuf)
-    n_pred, n_out, low, high, n_depth = r
     level = np.median(dbuf[:n_depth]) if n_depth else 0.0
     return n_pred, n_out, low, high, level, n_depth
 
