@@ -56,6 +56,19 @@ farther one (foreground fattening) instead of blending; each object's NOCS shrin
 (or swell from) its centre near its silhouette, where a network regresses to the mean; and
 each instance's mask is what a 28x28 mask head gives, its box resampled to 28x28 and back and
 thresholded at a level drawn per instance.
+A seventh (``variant="heldout7"``, fixed on 24 Nov 2026 before that round's evaluation) errs as
+networks that read the image rather than the geometry do: its coarsest depth field is the
+image's brightness, a Lambertian shading of the true surface under a light drawn for the
+sequence times an albedo per object and for the table (so it turns with each surface's
+orientation and is one value over a plane of one colour, such as the table), the finer ones are
+drawn anew for each object and for the table (the error jumps at every silhouette rather than
+running smoothly across it); each object's NOCS are stretched or squashed along the longer
+image axis of its box, by a share that grows with the box's aspect (a NOCS head that sees each
+crop resized to a square), a direction fixed in the camera frame, across the viewing axis; and
+where two instances touch, one of them (kept for the sequence) takes a band of the other's
+pixels, as wide as a width drawn anew in every frame, with its own NOCS carried over (the
+neighbour's surface, labelled and coordinated as the wrong object), while each instance's
+border with the background is eroded or dilated by a width kept for the sequence.
 """
 from __future__ import annotations
 
@@ -240,10 +253,12 @@ def _lens_row_field(rng, h, w, cells):
     return (out - out.mean()) / max(out.std(), 1e-9)
 
 
-VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5", "heldout6")
+VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5", "heldout6",
+            "heldout7")
+# heldout7's image fields are the tuning grid's, drawn per segment (ErrorState._segments).
 _FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field,
            "heldout3": _poly_field, "heldout4": _ring_field, "heldout5": _tile_field,
-           "heldout6": _lens_row_field}
+           "heldout6": _lens_row_field, "heldout7": _grid_field}
 
 
 @dataclass
@@ -323,6 +338,42 @@ class ErrorState:
             g[m] = (v - v.mean()) / max(v.std(), 1e-9) * size[int(iid)] / frame.depth[m]
         return g
 
+    def _shading(self, rng, frame):
+        """The image's brightness from ``frame``'s truth: each pixel's albedo (one per object
+        and one for the table, kept for the sequence) times its Lambertian shading, 0.3 + 0.7
+        max(0, n.l), under a light from the camera's side (kept for the sequence); zero mean
+        and unit std over the objects' pixels (the table off that mean by its own brightness),
+        times a coefficient that drifts as the fields do (unit variance). A relative depth error
+        that follows each surface's orientation and colour, one value over a plane of one
+        albedo."""
+        b = self._drift("shade", rng.normal())
+        light = self._kept("light", lambda: (v := rng.normal(size=3) * [1.0, 1.0, 0.0]
+                                             + [0.0, 0.0, -1.5]) / np.linalg.norm(v))
+        n = _normals(frame)
+        shade = 0.3 + 0.7 * np.clip(np.nan_to_num(n @ light, nan=0.5), 0.0, 1.0)
+        ok = np.isfinite(frame.depth)
+        albedo = np.zeros(frame.mask.shape)
+        for sid in np.unique(frame.mask[ok]):
+            albedo[frame.mask == sid] = self._kept(("albedo", int(sid)),
+                                                   lambda: float(rng.uniform(0.2, 1.0)))
+        on = ok & (frame.mask > 0) if np.sum(ok & (frame.mask > 0)) > 1 else ok
+        g = np.zeros(frame.mask.shape)
+        if on.sum() > 1:
+            v = albedo * shade
+            g[ok] = (v[ok] - v[on].mean()) / max(v[on].std(), 1e-9)
+        return b * g
+
+    def _segments(self, rng, frame, cells):
+        """A field of ``cells`` drawn for each segment of ``frame``'s truth (each object, and
+        the table) on its own, each drifting as the fields do: the error jumps at every
+        silhouette."""
+        h, w = frame.mask.shape
+        out = np.zeros((h, w))
+        for sid in np.unique(frame.mask):
+            m = frame.mask == sid
+            out[m] = self._drift(("segment", cells, int(sid)), _grid_field(rng, h, w, cells))[m]
+        return out
+
     def _object(self, iid, rng):
         """Per-object errors: the shape mismatch persists, the relief error drifts slowly."""
         e = self.err
@@ -388,7 +439,7 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         blurred = cv2.GaussianBlur(nocs.astype(np.float32), (k, k), 0).astype(np.float64)
         nocs[band] = blurred[band]
     if e.mask_px > 0:
-        mask, nocs = _mask_errors(mask, nocs, e.mask_px, rng, state.variant)
+        mask, nocs = _mask_errors(mask, nocs, e.mask_px, rng, state.variant, state)
         obj = mask > 0
     scale = state.scale
     if state.variant == "heldout3" and e.depth_scale > 0:
@@ -408,6 +459,10 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             # The coarsest scale follows each object's surface, the rest the image.
             total = state._surface(rng, frame) + sum(
                 state._field(("depth", c), rng, h, w, c) for c in e.field_cells[1:])
+        elif state.variant == "heldout7":
+            # The coarsest scale follows the image's brightness, the rest each segment.
+            total = state._shading(rng, frame) + sum(
+                state._segments(rng, frame, c) for c in e.field_cells[1:])
         else:
             total = sum(state._field(("depth", c), rng, h, w, c) for c in e.field_cells)
         depth *= 1.0 + e.field * total / np.sqrt(len(e.field_cells))
@@ -424,6 +479,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             nocs = _part_shift(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout6":
             nocs = _rim_shrink(nocs, mask, state, rng, e.nocs_field)
+        elif state.variant == "heldout7":
+            nocs = _crop_stretch(nocs, frame, state, rng, e.nocs_field)
         elif state.variant == "heldout":
             # Scaled to ``nocs_field`` rms on the objects, as the other variants' distortions:
             # unscaled, q^T W q with |q| < 0.5 moved the NOCS 8x less than the tuning field.
@@ -539,6 +596,77 @@ def _mask_head(m, rng):
     return out
 
 
+def _normals(frame):
+    """Unit surface normals (H, W, 3) of ``frame``'s truth in the camera frame, facing the
+    camera, from differences between neighbouring pixels of one segment (forward, else
+    backward); NaN where a pixel has no such neighbour along a row or a column."""
+    h, w = frame.depth.shape
+    cx, cy = frame.principal_point
+    vv, uu = np.mgrid[0:h, 0:w]
+    z = frame.depth
+    p = np.stack([z * (uu - cx) / frame.focal, z * (vv - cy) / frame.focal, z], -1)
+    seg = np.where(np.isfinite(z), frame.mask.astype(np.int64), -1)
+
+    def tangent(axis):
+        d = np.diff(p, axis=axis)
+        same = (np.diff(seg, axis=axis) == 0) & (np.take(seg, range(1, seg.shape[axis]),
+                                                         axis=axis) >= 0)
+        d[~same] = np.nan
+        pad = [(0, 0)] * 3
+        pad[axis] = (0, 1)
+        fwd = np.pad(d, pad, constant_values=np.nan)
+        pad[axis] = (1, 0)
+        bwd = np.pad(d, pad, constant_values=np.nan)
+        return np.where(np.isfinite(fwd), fwd, bwd)
+
+    n = np.cross(tangent(1), tangent(0))
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    return n * -np.sign(np.sum(n * p, axis=-1, keepdims=True))
+
+
+def _crop_stretch(nocs, frame, state, rng, rms):
+    """Each object's NOCS stretched or squashed (a sign per object, for the whole sequence)
+    along the longer image axis of its (true) box, mapped into the object's frame, by a factor
+    1 +- 3 ``rms`` min(1, long / short - 1) (+-9% at the base bound for a box twice as long as
+    wide, as the relief and shape families' +-10%): a NOCS head that sees each crop resized to
+    a square. The direction is fixed in the camera frame, across the viewing axis."""
+    out = nocs.copy()
+    rot = {o.instance_id: o.rotation for o in frame.objects}
+    for iid in np.unique(frame.mask[frame.mask > 0]):
+        m = frame.mask == iid
+        ys, xs = np.nonzero(m)
+        long, short = sorted((np.ptp(xs) + 1, np.ptp(ys) + 1), reverse=True)
+        axis = rot[int(iid)][0 if np.ptp(xs) >= np.ptp(ys) else 1]  # image axis, object frame
+        axis = axis / np.linalg.norm(axis)
+        sign = state._sign(("crop", int(iid)), rng)
+        q = nocs[m] - nocs[m].mean(0)
+        move = (q @ axis)[:, None] * axis
+        out[m] = nocs[m] + sign * 3.0 * rms * min(1.0, long / short - 1.0) * move
+    return out
+
+
+def _bleed(mask, new, nocs, px, state, rng):
+    """Where two instances of the true ``mask`` touch, one of them (drawn once per pair and
+    kept for the sequence) takes the other's pixels within a width of 1..``px`` drawn anew in
+    every frame, with the NOCS of its own nearest pixel: the neighbour's surface labelled, and
+    coordinated, as the wrong object."""
+    from scipy import ndimage
+
+    ids = [int(i) for i in np.unique(mask[mask > 0])]
+    for a in ids:
+        dist, (iy, ix) = ndimage.distance_transform_edt(mask != a, return_indices=True)
+        for b in ids:
+            if b == a or not np.any((mask == b) & (dist <= 1.5)):
+                continue
+            if state._kept(("bleed", min(a, b), max(a, b)),
+                           lambda: int(rng.choice([a, b]))) != a:
+                continue
+            stolen = (mask == b) & (new == b) & (dist <= int(rng.integers(1, px + 1)))
+            new[stolen] = a
+            nocs[stolen] = nocs[iy[stolen], ix[stolen]]
+    return new, nocs
+
+
 def _view_stretch(nocs, frame, state, rng, rms):
     """Each object's NOCS stretched or flattened (per object, for the whole sequence) along the
     NOCS direction that depth follows on the object (the viewing axis in its frame, from the
@@ -596,10 +724,11 @@ def _ragged(m, px, rng):
     return (m & ~(inner & (rng.random(m.shape) < p))) | (outer & (rng.random(m.shape) < p))
 
 
-def _mask_errors(mask, nocs, px, rng, variant):
+def _mask_errors(mask, nocs, px, rng, variant, state=None):
     """Erode or dilate (``heldout2``: shift; ``heldout3``: fray; ``heldout4``: outline as a
     polygon with holes; ``heldout5``: fill to the convex hull; ``heldout6``: through a 28x28
-    mask head) each instance by up to ``px``
+    mask head; ``heldout7``: by a width kept for the sequence in ``state``, then bleed into
+    touching instances) each instance by up to ``px``
     pixels; grown pixels keep the background depth and take the nearest object's NOCS, as a
     segmentation network's would."""
     shape = {"heldout": cv2.MORPH_ELLIPSE, "heldout3": cv2.MORPH_CROSS}.get(variant,
@@ -622,13 +751,16 @@ def _mask_errors(mask, nocs, px, rng, variant):
             m = _hull(m)
         elif variant == "heldout6":
             m = _mask_head(m, rng)
-        elif r := int(rng.integers(-px, px + 1)):
+        elif r := (int(state._kept(("mask_px", int(iid)), lambda: rng.integers(-px, px + 1)))
+                   if variant == "heldout7" else int(rng.integers(-px, px + 1))):
             kern = cv2.getStructuringElement(shape, (2 * abs(r) + 1,) * 2)
             m = cv2.dilate(m, kern) if r > 0 else cv2.erode(m, kern)
         m = m.astype(bool)
         grow = m & (mask == 0) & (new == 0)
         nocs[grow] = near[grow]
         new[m & ((new == 0) | (mask == iid))] = iid
+    if variant == "heldout7":
+        new, nocs = _bleed(mask, new, nocs, px, state, rng)
     return new, nocs
 
 
