@@ -167,7 +167,8 @@ def test_nocs_with_a_constant_channel_give_no_focal():
 # the votes, or no object that passed the fit's other checks), at 320x240: their reasons did not
 # name the channel. Of the 480 frames of seeds 0-39 at both sizes, `predicted` and `sensor`, with
 # each channel constant in turn, 457 named it before and 476 now; the 4 others answer (-62% to
-# +80%, std_rel 18-121%): no object of theirs is solid enough in view to show the flat NOCS.
+# +80%, std_rel 19-121%; `python bench/hostile_inputs.py lost-channel`, 24 Nov 2026): no object
+# of theirs is solid enough in view to show the flat NOCS.
 @pytest.mark.parametrize("preset, seed, channel", [
     ("predicted", 5, 0), ("predicted", 27, 2), ("predicted", 33, 0), ("sensor", 4, 1),
     ("sensor", 22, 0), ("sensor", 31, 2)])
