@@ -78,7 +78,8 @@ def test_exact_nocs_leave_focal_to_the_pixels():
 
 def test_std_rel_follows_the_fits_lean_on_depth():
     """Where the pixels fix f, neither the unseen-depth term nor the objects' prior spread
-    inflates std_rel (12 sensor frames measured: median std_rel 0.114%, error 0.001%; 0.078%
+    inflates std_rel (12 sensor frames measured: median std_rel 0.017%, error 0.001%; 0.114%
+    while a misfit the depth made counted as a shape error in frames of several objects, 0.078%
     while the objects were weighted by their whole variance, 0.21% while the prior spread
     ignored the lean, 0.94% before the unseen-depth term followed it)."""
     std = []
@@ -86,7 +87,7 @@ def test_std_rel_follows_the_fits_lean_on_depth():
         fr = scenes.world_frame("sensor", FIRST_SEED + s)
         est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False)
         std.append(est.std_rel)
-    assert np.median(std) <= 0.0015
+    assert np.median(std) <= 0.0003
 
 
 @pytest.mark.skipif(compiled.numba is None, reason="numba is not installed")
@@ -169,3 +170,48 @@ def test_one_wild_tilt_does_not_inflate_every_objects_budget():
     est = estimate_focal(fr.depth, fr.nocs, fr.mask, poses=False, seed=0)
     assert est.std_rel < 0.03 and abs(est.focal / 600.0 - 1) < 0.015, (est.focal, est.std_rel)
     assert abs(est.focal / 600.0 - 1) <= 2 * est.std_rel
+
+
+def _nocs_made(preset):
+    from fcop_ros.core.error_model import nocs_made_share
+    from fcop_ros.core.estimator import _nocs_spread
+
+    shares = []
+    for s in range(6):
+        fr, inst = _objects(preset, s)
+        fit = _fit(inst, fr.focal)
+        spread = np.array([_nocs_spread(i.p) for i in inst])
+        shares.append(nocs_made_share(fit, spread)[fit.ok & (fit.quality > 0.5)])
+    return np.concatenate(shares)
+
+
+def test_a_misfit_the_depth_made_is_no_shape_error():
+    """A smooth depth field bends an object along its pixels' rays, which the similarity cannot
+    follow: with exact NOCS the misfit is the depth's, not the shape's. NOCS errors move the
+    points across the rays too. Measured share of the misfit put to the NOCS (6 frames, 25
+    objects each), median (90th percentile): depth field alone 0.000 (0.007), sensor 0.000
+    (0.000); shape mismatch 1.000, smooth NOCS distortion 0.836, NOCS pixel noise 1.000
+    (before: 1 for every misfit, so exact NOCS under a 1% depth field read a shape error)."""
+    for preset in ("only_field", "sensor"):
+        share = _nocs_made(preset)
+        assert share.size >= 20 and np.median(share) <= 0.05 and np.percentile(share, 90) <= 0.1
+    for preset in ("only_shape", "only_nocs_field", "only_nocs_pixel"):
+        share = _nocs_made(preset)
+        assert share.size >= 20 and np.median(share) >= 0.5, preset
+
+
+def test_a_lone_object_keeps_the_misfit_the_depth_made():
+    """For exact NOCS under a smooth depth field the fit's variance is too small (its residuals
+    are correlated); where a second object can disagree the frame's between-object spread shows
+    it, but a lone object has only its misfit. 60 single-object sensor frames of the world
+    (seeds 1000-1059): 2 std_rel covered 88.3%; 75.0% while a lone object's depth-made misfit
+    was excused too (1964e2c, reverted)."""
+    from fcop_ros.synthetic.world import world_frame
+
+    cover = []
+    for s in range(60):
+        fr = world_frame("sensor", 1000 + s, objects=1)
+        est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=s, poses=False)
+        assert est.focal is not None, est.reason
+        cover.append(abs(np.log(est.focal / fr.focal)) <= 2 * est.std_rel)
+    assert np.mean(cover) >= 0.85

@@ -11,7 +11,8 @@ the pixels pin f down (exact NOCS: a perspective-n-point problem) a depth error 
 when noisy NOCS leave f to the depths, it moves f one for one (a relief error delta gives -delta
 in log f, an offset o gives o / z). The unseen-depth term is sized by that derivative, so it
 follows the fit's actual lean. The NOCS side: a category prior's shape that is not this object's
-errs in f about as much as it misfits the shape.
+errs in f about as much as it misfits the shape, a misfit told from the depth's by its part
+across the pixels' rays where a second object can show what the fit's own variance misses.
 """
 from __future__ import annotations
 
@@ -264,6 +265,21 @@ def _field_tilts(tilt, good):
     return good & ~(norms > WILD_TILT * np.median(norms[good]))
 
 
+def nocs_made_share(fits: ObjectFits, spread) -> np.ndarray:
+    """The share of each object's misfit (1 - quality) that its NOCS made (O,), in [0, 1].
+
+    A depth error moves a point along its ray; a NOCS error moves it every way, two thirds of
+    its misfit across the rays. The pixels' residuals at the fitted focal length are that
+    across part, relative to the object's 3D variance (its scale times ``spread``, the rms
+    distance of its NOCS from their centroid). A smooth depth field bends an object in a way the
+    similarity cannot follow, but only along the rays.
+    """
+    with np.errstate(over="ignore"):  # a fit that ran away: all of its misfit is the NOCS'
+        across = 2.0 * (fits.sigma_px * fits.translation[:, 2]
+                        / np.maximum(fits.focal * fits.scale * spread, 1e-300)) ** 2
+        return np.minimum(1.5 * across / np.maximum(1.0 - fits.quality, 1e-300), 1.0)
+
+
 def object_variances(support, fits: ObjectFits, good, spread, raw_spread, relief_lean,
                      options):
     """Per object (O,): the fit's variance of log f plus the systematic terms.
@@ -277,7 +293,11 @@ def object_variances(support, fits: ObjectFits, good, spread, raw_spread, relief
     relief by about that times z, so its log f by that times z / relief times the relief
     derivative; ``shape_error`` times the square root of the
     shape share the similarity leaves unexplained, not counting the share that the measured
-    depth and NOCS noise alone would leave.
+    depth and NOCS noise alone would leave, nor, where two or more objects are ``good``, the
+    share the depth made (:func:`nocs_made_share`). A lone object keeps that share: for exact
+    NOCS under a smooth depth field the fit's variance is too small (its residuals are
+    correlated, the fit counts them as independent), and with no second object to disagree
+    (the frame's between-object spread, :mod:`.combine`) the depth's misfit stands for it.
     """
     field = _field_tilts(fits.tilt, good)
     curvature = options.unseen_depth_error * np.sqrt(np.mean(fits.tilt[field] ** 2))
@@ -291,4 +311,7 @@ def object_variances(support, fits: ObjectFits, good, spread, raw_spread, relief
     noise_p = noise_p / np.maximum(raw_spread**2, 1e-300)
     kept = (1.0 - np.minimum(noise_y, 0.9)) * (1.0 - np.minimum(noise_p, 0.9))
     quality = np.minimum(fits.quality / kept, 1.0)
-    return var + options.shape_error**2 * (1.0 - quality)
+    shape = options.shape_error**2 * (1.0 - quality)
+    if good.sum() >= 2:
+        shape = shape * nocs_made_share(fits, spread)
+    return var + shape
