@@ -375,12 +375,16 @@ def zoom(presets, zoom_sequences, first_seed, variant):
                 within += delay <= 15
                 prompt += restart is not None and restart <= 3
                 if delay > 15:
-                    single = np.median([abs(np.log(r[1] / r[0])) for r in rows
-                                        if r[1] is not None])
-                    end = abs(np.log(rows[-1][3] / rows[-1][0])) if rows[-1][3] else np.nan
+                    # A sequence whose frames all go unanswered after the zoom (its objects
+                    # left the view) has no single-frame error: "no frame", not a NaN and
+                    # numpy's warning about an empty mean.
+                    answered = [abs(np.log(r[1] / r[0])) for r in rows if r[1] is not None]
+                    single = f"{100 * np.median(answered):.1f}" if answered else "no frame"
+                    end = (f"{100 * abs(np.log(rows[-1][3] / rows[-1][0])):.1f}"
+                           if rows[-1][3] else "none")
                     misses.append(f"x{factor} seed {first_seed + 100 + q}: "
                                   f"{'none' if restart is None else restart}; "
-                                  f"{100 * single:.1f} / {100 * end:.1f}")
+                                  f"{single} / {end}")
         n = 2 * zoom_sequences
         print(f"| {preset} | {n} | {within} | {prompt} | {', '.join(misses) or '-'} |",
               flush=True)
