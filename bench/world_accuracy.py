@@ -79,6 +79,14 @@ OPTIONS = EstimatorOptions()
 OBJECTS = None
 
 
+#: Each error model's first frame seed and first sequence seed (``--heldout*`` picks one).
+SEEDS = {"tuning": (1000, 5000), "heldout": (900000, 905000), "heldout2": (950000, 955000),
+         "heldout3": (980000, 985000), "heldout4": (990000, 995000),
+         "heldout5": (1010000, 1015000), "heldout6": (1020000, 1025000),
+         "heldout7": (1030000, 1035000), "heldout8": (1040000, 1045000)}
+ORDINALS = ("", "second ", "third ", "fourth ", "fifth ", "sixth ", "seventh ", "eighth ")
+
+
 def plain_reference(fr, rng):
     """The accuracy issue's plain reference: 7x7 masked box means of depth and NOCS inside each
     instance, 2 px erosion, triplets with well-separated NOCS among random candidates, interval
@@ -401,22 +409,11 @@ def main() -> None:
     ap.add_argument("--zoom-sequences", type=int, default=8,
                     help="zoom sequences per preset and zoom direction")
     held = ap.add_mutually_exclusive_group()
-    held.add_argument("--heldout", action="store_true",
-                      help="the held-out seeds and error model instead")
-    held.add_argument("--heldout2", action="store_true",
-                      help="the second held-out seeds and error model instead")
-    held.add_argument("--heldout3", action="store_true",
-                      help="the third held-out seeds and error model instead")
-    held.add_argument("--heldout4", action="store_true",
-                      help="the fourth held-out seeds and error model instead")
-    held.add_argument("--heldout5", action="store_true",
-                      help="the fifth held-out seeds and error model instead")
-    held.add_argument("--heldout6", action="store_true",
-                      help="the sixth held-out seeds and error model instead")
-    held.add_argument("--heldout7", action="store_true",
-                      help="the seventh held-out seeds and error model instead")
-    held.add_argument("--heldout8", action="store_true",
-                      help="the eighth held-out seeds and error model instead")
+    for k, name in enumerate(SEEDS):
+        if name != "tuning":
+            held.add_argument(f"--{name}", dest="variant", action="store_const", const=name,
+                              help=f"the {ORDINALS[k - 1]}held-out seeds and error model "
+                              "instead")
     ap.add_argument("--parts", nargs="+", default=["single", "bias", "window"],
                     choices=["single", "bias", "window", "zoom", "preset_bias", "weights",
                              "tau"],
@@ -449,17 +446,8 @@ def main() -> None:
     except ImportError:
         have_colmap = False
         print("pycolmap is not installed (pip install '.[bench]'): no P4Pf rows\n")
-    variant, frame_seed, seq_seed = (
-        ("heldout", 900000, 905000) if args.heldout
-        else ("heldout2", 950000, 955000) if args.heldout2
-        else ("heldout3", 980000, 985000) if args.heldout3
-        else ("heldout4", 990000, 995000) if args.heldout4
-        else ("heldout5", 1010000, 1015000) if args.heldout5
-        else ("heldout6", 1020000, 1025000) if args.heldout6
-        else ("heldout7", 1030000, 1035000) if args.heldout7
-        else ("heldout8", 1040000, 1045000) if args.heldout8
-        else ("tuning", 1000, 5000)
-    )
+    variant = args.variant or "tuning"
+    frame_seed, seq_seed = SEEDS[variant]
     print(
         f"{'tuning' if variant == 'tuning' else 'HELD-OUT'} set: error model '{variant}', "
         f"frames from seed {frame_seed}, sequences from seed {seq_seed}\n"
