@@ -14,6 +14,9 @@ Named presets (``WORLD_PRESETS``):
 - ``predicted``: every family, as from a monocular depth network and a NOCS network.
   Calibrated so that the paper's method taken literally scores near the paper's 6.87% (REAL275).
 - ``only_<family>``: one zero-mean mechanism alone, for bias tests.
+- ``only_nocs_jpeg``, ``predicted_nocs_jpeg``: the NOCS image through JPEG (a pipe, not a
+  predictor: not zero-mean, in no other preset), alone and on top of ``predicted``, so that
+  what a compressed image transport does is measured on tuning frames.
 
 The older fixed presets of :mod:`fcop_ros.synthetic.noise` (``mild``, ``moderate``, ``harsh``)
 are fixed settings of these same mechanisms: each is written once, in :func:`apply_errors`.
@@ -108,7 +111,10 @@ class ErrorFamilies:
     NOCS noise (NOCS units); nocs_field: smooth NOCS distortion; nocs_outliers: share of object
     pixels with random NOCS; nocs_blur_px: NOCS blur across object boundaries; shape: per-object
     anisotropic scale of the NOCS axes (category prior mismatch); mask_px: mask erosion or
-    dilation; blobs: spurious instances with random NOCS.
+    dilation; blobs: spurious instances with random NOCS; nocs_jpeg: the NOCS image sent as JPEG
+    (ROS's compressed image transport) at a quality drawn in 75..95 per sequence, a switch that
+    no preset turns on (its error is not zero-mean: at the silhouettes the NOCS ring and are
+    pulled towards the black background), for choosing a defence on tuning frames.
     """
 
     depth_scale: float = 0.0
@@ -127,6 +133,7 @@ class ErrorFamilies:
     shape: float = 0.0
     mask_px: int = 0
     blobs: int = 0
+    nocs_jpeg: bool = False
 
     def scaled(self, k: float) -> "ErrorFamilies":
         """Every continuous strength times k (integers and the field scales unchanged)."""
@@ -175,6 +182,12 @@ for _name in ZERO_MEAN_FAMILIES:
     WORLD_PRESETS[f"only_{_name}"] = ErrorFamilies(
         **{_name: _bound}, **({"field_drift": 0.6} if _name == "field" else {})
     )
+# Errors of the pipes between the predictors and the estimator, not zero-mean and in no preset:
+# each alone, and the `predicted` preset with it.
+PIPE_FAMILIES = ("nocs_jpeg",)
+for _name in PIPE_FAMILIES:
+    WORLD_PRESETS[f"only_{_name}"] = ErrorFamilies(**{_name: True})
+    WORLD_PRESETS[f"predicted_{_name}"] = replace(WORLD_PRESETS["predicted"], **{_name: True})
 
 
 @dataclass
@@ -563,6 +576,9 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
     if state.variant == "heldout8" and e.nocs_pixel > 0:
         nocs[mask == 0] = 0.0
         nocs = _jpeg(nocs, state._kept("jpeg", lambda: int(rng.integers(80, 96))))
+    elif e.nocs_jpeg:
+        nocs[mask == 0] = 0.0
+        nocs = _jpeg(nocs, state._kept("jpeg", lambda: int(rng.integers(75, 96))))
     nocs[mask == 0] = 0.0
     return replace(frame, depth=depth, nocs=nocs, mask=mask)
 
@@ -743,13 +759,15 @@ def _disparity8(depth):
     return out
 
 
-def _jpeg(nocs, quality):
+def _jpeg(nocs, quality, full_chroma=False):
     """The NOCS image (H, W, 3 in [0, 1]) as an rgb8 image sent through JPEG at ``quality``
     (OpenCV's encoder, as ROS's compressed image transport uses: 8 bits, 8x8 blocks, chroma
-    subsampled 2x2) and decoded."""
+    subsampled 2x2, or kept whole with ``full_chroma``) and decoded."""
     img = np.round(np.clip(nocs, 0.0, 1.0) * 255.0).astype(np.uint8)[..., ::-1]
-    ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(img), [cv2.IMWRITE_JPEG_QUALITY,
-                                                              int(quality)])
+    how = [cv2.IMWRITE_JPEG_QUALITY, int(quality)]
+    if full_chroma:
+        how += [cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444]
+    ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(img), how)
     return cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1].astype(np.float64) / 255.0
 
 
