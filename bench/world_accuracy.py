@@ -3,7 +3,7 @@
     python bench/world_accuracy.py [--frames 60] [--sequences 40] [--zoom-sequences 8]
         [--heldout | --heldout2 | --heldout3 | --heldout4 | --heldout5 | --heldout6
          | --heldout7 | --heldout8]
-        [--parts single bias window zoom preset_bias weights tau] [--objects N]
+        [--parts single bias window zoom preset_bias pipes weights tau] [--objects N]
         [--set NAME=VALUE]
 
 Tuned rows use the seeds the estimator's few constants were chosen on (frames from seed 1000,
@@ -48,7 +48,10 @@ stays within 5% of the new focal length, and restarts on static ones. Zoom (``--
 the same zoom sequences, each one that does not settle within 15 frames told apart by whether
 the window restarted at the zoom and how far the frames after it err themselves. Preset bias
 (``--parts preset_bias``): fcop_ros's signed median over ``--bias-frames`` frames of each full
-preset, with its standard error. Weights (``--parts weights``): within a frame, how the
+preset, with its standard error. Pipes (``--parts pipes``): the NOCS image through JPEG
+(``nocs_jpeg``, in no preset) alone, and the shift it makes in ``predicted`` frame by frame on
+the same frames; then which part of JPEG does it, on frames with NOCS noise alone. Weights
+(``--parts weights``): within a frame, how the
 objects' errors rank with their systematic and their noise variance, and the frame's error
 under either weighting. Tau (``--parts tau``): the between-object spread that frames of two
 or more objects show, the rule ``object_tau`` was set by. ``--objects N`` makes every scene
@@ -60,6 +63,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 
 import numpy as np
 from scipy import ndimage
@@ -68,7 +72,8 @@ from fcop_ros import FocalWindow, WindowOptions, estimate_focal, interval_stabbi
 from fcop_ros.core import PAPER_FCOP_IS, EstimatorOptions
 from fcop_ros.core.camera import image_centre
 from fcop_ros.core.stabbing import focal_intervals
-from fcop_ros.synthetic.world import WORLD_PRESETS, ZERO_MEAN_FAMILIES, world_frame, world_frames
+from fcop_ros.synthetic.world import (PIPE_FAMILIES, WORLD_PRESETS, ZERO_MEAN_FAMILIES,
+                                     world_frame, world_frames)
 from fcop_ros.tools.cli import HelpFormatter
 # bench/peers.py: the script's own folder is on the path when run as a script
 from peers import p4pf
@@ -237,6 +242,66 @@ def preset_bias(presets, frames, first_seed, variant):
         print(f"| {preset} | {err.size} | {np.median(err):+.2f} | "
               f"{_median_standard_error(err):.2f} | {np.mean(err):+.2f} | "
               f"{np.std(err) / np.sqrt(err.size):.2f} |", flush=True)
+
+
+def pipes(frames, first_seed, variant):
+    """What each pipe between the predictors and the estimator does (errors in no preset, not
+    zero-mean): fcop_ros's signed median with the pipe alone, and the shift it makes in
+    ``predicted``, frame by frame on the same frames (which differ only by the pipe)."""
+    print("\n| pipe | alone: signed median % (standard error) | `predicted` without / with it: "
+          "signed median % | median abs error % | coverage | paired shift: median % "
+          "(standard error) |")
+    print("|---|---|---|---|---|---|")
+    for pipe in PIPE_FAMILIES:
+        alone = np.array([100 * np.log(est.focal / fr.focal) for fr, est in
+                          _estimates(f"only_{pipe}", frames, first_seed, variant)
+                          if est.focal is not None])
+        pairs = [[(np.log(est.focal / fr.focal), est.std_rel) if est.focal is not None
+                  else (np.nan, np.nan) for fr, est in _estimates(p, frames, first_seed, variant)]
+                 for p in ("predicted", f"predicted_{pipe}")]
+        (e0, s0), (e1, s1) = (100 * np.array(p).T for p in pairs)
+
+        def row(e, s):
+            ok = np.isfinite(e)
+            return (f"{np.median(e[ok]):+.2f}", f"{np.median(np.abs(e[ok])):.2f}",
+                    f"{100 * np.mean(np.abs(e[ok]) <= 2 * s[ok]):.0f}%")
+
+        shift = (e1 - e0)[np.isfinite(e1 - e0)]
+        print(f"| {pipe} | {np.median(alone):+.2f} ({_median_standard_error(alone):.2f}) | "
+              + " | ".join(f"{a} / {b}" for a, b in zip(row(e0, s0), row(e1, s1)))
+              + f" | {np.median(shift):+.2f} ({_median_standard_error(shift):.2f}) |",
+              flush=True)
+
+
+def jpeg_parts(frames, first_seed, variant, quality=85):
+    """Which part of JPEG moves the focal length: frames with per-pixel NOCS noise alone (up to
+    its base bound) sent raw, rounded to 8 bits, through JPEG at ``quality`` with the colour kept
+    whole (4:4:4) or halved (4:2:0, as ROS's compressed transport sends it), and the last with
+    the masks eroded by 3 px instead of 1 (were the error only at the silhouettes, that would
+    remove it)."""
+    from fcop_ros.synthetic.world import ErrorFamilies, _jpeg
+
+    kinds = {"raw": lambda n: n, "8 bits": lambda n: np.round(n * 255.0) / 255.0,
+             "JPEG 4:4:4": lambda n: _jpeg(n, quality, full_chroma=True),
+             "JPEG 4:2:0": lambda n: _jpeg(n, quality),
+             "JPEG 4:2:0, erode_px 3": lambda n: _jpeg(n, quality)}
+    print(f"\n| the NOCS image (noise alone, quality {quality}) | signed median % "
+          "(standard error) | median abs error % |")
+    print("|---|---|---|")
+    noisy = ErrorFamilies(nocs_pixel=WORLD_PRESETS["only_nocs_pixel"].nocs_pixel)
+    for kind, send in kinds.items():
+        opts = OPTIONS if "erode" not in kind else replace(OPTIONS, erode_px=3)
+        err = []
+        for s in range(frames):
+            fr = world_frame(noisy, first_seed + s, variant, objects=OBJECTS)
+            nocs = send(fr.nocs)
+            nocs[fr.mask == 0] = 0.0
+            est = estimate_focal(fr.depth, nocs, fr.mask, seed=s, poses=False, options=opts)
+            if est.focal is not None:
+                err.append(100 * np.log(est.focal / fr.focal))
+        err = np.array(err)
+        print(f"| {kind} | {np.median(err):+.2f} ({_median_standard_error(err):.2f}) | "
+              f"{np.median(np.abs(err)):.2f} |", flush=True)
 
 
 def weights(presets, frames, first_seed, variant):
@@ -415,12 +480,13 @@ def main() -> None:
                               help=f"the {ORDINALS[k - 1]}held-out seeds and error model "
                               "instead")
     ap.add_argument("--parts", nargs="+", default=["single", "bias", "window"],
-                    choices=["single", "bias", "window", "zoom", "preset_bias", "weights",
-                             "tau"],
+                    choices=["single", "bias", "window", "zoom", "preset_bias", "pipes",
+                             "weights", "tau"],
                     help="zoom (not run by default): what keeps each zoom sequence from "
                     "settling, the restart or the frames themselves; preset_bias (not run by "
                     "default): fcop_ros's signed median over --bias-frames frames of each full "
-                    "preset; weights (not run by default): "
+                    "preset; pipes (not run by default): a JPEG'd NOCS image alone and in "
+                    "`predicted`, on --frames frames; weights (not run by default): "
                     "what ranks the objects' errors within a frame, over --bias-frames frames")
     ap.add_argument("--bias-frames", type=int, default=2000,
                     help="frames per preset for preset_bias")
@@ -463,6 +529,9 @@ def main() -> None:
         zoom(presets, args.zoom_sequences, seq_seed, variant)
     if "preset_bias" in args.parts:
         preset_bias(presets, args.bias_frames, frame_seed, variant)
+    if "pipes" in args.parts:
+        pipes(args.frames, frame_seed, variant)
+        jpeg_parts(args.frames, frame_seed, variant)
     if "weights" in args.parts:
         weights(presets, args.bias_frames, frame_seed, variant)
     if "tau" in args.parts:
