@@ -67,19 +67,22 @@ def test_noise_presets_change_what_they_say(preset):
 
 
 def test_world_variants_share_the_scene_and_the_strength_of_its_errors():
-    """The nine error models (tuning and eight held-out) see one scene and truth per seed and
+    """The ten error models (tuning and nine held-out) see one scene and truth per seed and
     err about as strongly: rms relative depth error of a smooth field alone and rms NOCS
     displacement per axis of a NOCS distortion alone, over 4 frames (measured, tuning /
-    heldout / heldout2 / heldout3 / heldout4 / heldout5 / heldout6 / heldout7 / heldout8: depth
-    0.030 / 0.038 / 0.033 / 0.040 / 0.025 / 0.036 / 0.030 / 0.037 / 0.038, NOCS 0.016 each but
-    heldout4's, heldout7's and heldout8's 0.003: heldout4's stretch lies all along the one axis
+    heldout / heldout2 / heldout3 / heldout4 / heldout5 / heldout6 / heldout7 / heldout8 /
+    heldout9: depth 0.030 / 0.038 / 0.033 / 0.040 / 0.025 / 0.036 / 0.030 / 0.037 / 0.038 /
+    0.039, NOCS 0.016 each but heldout4's, heldout7's, heldout8's and heldout9's 0.003 (0.0025):
+    heldout4's stretch lies all along the one axis
     that moves f, the viewing axis, and is sized as the relief and shape families are, by its
     factor; its first version, stretched to 0.016 rms and with a surface field relative to
     depth rather than to the object, cost the paper's method 17.6% on `predicted`, against 4-6%
     on the other models and the paper's 6.87% on real data; heldout7's stretch lies all along
     an image axis, which moves f as directly, and is sized by its factor in the same way, as is
-    heldout8's turn about each object's vertical axis, a stretch across the view; the held-out
-    model's quadratic warp moved the NOCS 0.002 before it was scaled like the others)."""
+    heldout8's turn about each object's vertical axis, a stretch across the view, and
+    heldout9's pull of the NOCS towards their ramp across the image, which changes their relief;
+    the held-out model's quadratic warp moved the NOCS 0.002 before it was scaled like the
+    others)."""
     from fcop_ros.synthetic.world import VARIANTS, ErrorFamilies, world_frame
 
     for v in VARIANTS:
@@ -96,7 +99,8 @@ def test_world_variants_share_the_scene_and_the_strength_of_its_errors():
             p.append(nf.nocs[obj] - clean.nocs[obj])
         depth_rms = np.sqrt(np.mean(np.concatenate(d) ** 2))
         nocs_rms = np.sqrt(np.mean(np.concatenate(p) ** 2))
-        nocs_range = (0.002, 0.01) if v in ("heldout4", "heldout7", "heldout8") else (0.01, 0.04)
+        nocs_range = ((0.002, 0.01) if v in ("heldout4", "heldout7", "heldout8", "heldout9")
+                      else (0.01, 0.04))
         assert 0.02 < depth_rms < 0.05 and nocs_range[0] < nocs_rms < nocs_range[1], (
             v, depth_rms, nocs_rms)
     with pytest.raises(ValueError, match="unknown error-model variant"):
@@ -577,3 +581,145 @@ def test_a_jpeg_nocs_image_errs_in_chroma_at_the_silhouettes_and_in_no_preset():
     assert on_presets == {"only_nocs_jpeg", "predicted_nocs_jpeg"}
     assert WORLD_PRESETS["predicted_nocs_jpeg"] == replace(WORLD_PRESETS["predicted"],
                                                            nocs_jpeg=True)
+
+
+def test_ninth_heldout_model_errs_as_the_pipeline_around_the_networks():
+    """heldout9: its depth fields are fixed in the scene, an error in metres that a surface
+    point keeps as the camera moves (the same points' errors in frames 0 and 10 of 4 seeds,
+    matched within 0.5 mm in the first frame's camera coordinates, differ by 0.002-0.015 of
+    their rms; the tuning grid field, kept in the image with field_drift 0, by 0.61-1.04);
+    with per-pixel depth noise the depth is the truth area-averaged to 1/2 or 1/4 of the
+    size, one factor for the sequence, and brought back bilinearly (a ramp kept within 1e-12, a
+    step spread over k..2k pixels; in the world's frames 0.004-0.016 rms relative error on the
+    objects, from their silhouettes, median 4e-6..1e-4); each object's NOCS move by c (their
+    affine fit in the image - the NOCS), one c per object within 1e-9, 0 < |c| <= 3
+    nocs_field, both signs, the move without an affine part (0.0025 rms per axis, the range
+    test's); with per-pixel NOCS noise each frame's NOCS and mask are the last frame's truth
+    and its depth its own (0.025-0.029 rms per axis where the masks agree, 0.4-2.3% of the
+    pixels relabelled, seeds 0-3), and never without; with mask errors the images are moved by
+    whole pixels, up to 1% of the image's size per axis at mask_px 3 (10 of 12 seeds moved, by
+    1-2 px, up to 0.83%; 0.006-0.032 rms relative depth error on the true objects' pixels),
+    the same in every frame, and the frame's principal point is the one under which the
+    pixels obey the camera model exactly."""
+    from scipy.spatial import cKDTree
+
+    from fcop_ros.synthetic.world import ErrorFamilies, _low_res, world_frames
+
+    def scene_points(fr, first):
+        h, w = fr.depth.shape
+        cx, cy = fr.principal_point
+        vv, uu = np.mgrid[0:h, 0:w]
+        ok = np.isfinite(fr.depth)
+        z = fr.depth[ok]
+        x = np.stack([z * (uu[ok] - cx) / fr.focal, z * (vv[ok] - cy) / fr.focal, z], -1)
+        a = min(first.objects, key=lambda o: o.instance_id)
+        b = {o.instance_id: o for o in fr.objects}[a.instance_id]
+        return ok, (x - b.translation) @ (a.rotation @ b.rotation.T).T + a.translation
+
+    still = {}
+    for v in ("heldout9", "tuning"):
+        still[v] = []
+        fam = ErrorFamilies(field=0.05, field_cells=(1, 2, 4), field_drift=0.0)
+        for seed in range(4):
+            truth = world_frames(ErrorFamilies(), seed, 11, v).frames
+            seen = world_frames(fam, seed, 11, v).frames
+            err = [seen[k].depth - truth[k].depth for k in (0, 10)]
+            (ok0, p0), (ok1, p1) = (scene_points(truth[k], truth[0]) for k in (0, 10))
+            dist, idx = cKDTree(p0).query(p1)
+            near = dist < 5e-4
+            assert near.sum() > 1000, near.sum()
+            e0, e1 = err[0][ok0][idx[near]], err[1][ok1][near]
+            still[v].append(np.sqrt(np.mean((e1 - e0) ** 2) / np.mean(e0 ** 2)))
+    assert max(still["heldout9"]) < 0.05 and min(still["tuning"]) > 0.3, still
+
+    ramp = np.tile(np.linspace(1.0, 2.0, 64), (48, 1))
+    step = np.where(np.arange(64) < 30, 1.0, 2.0) * np.ones((48, 1))
+    for k in (2, 4):
+        np.testing.assert_allclose(_low_res(ramp, k)[:, 2 * k:-2 * k],
+                                   ramp[:, 2 * k:-2 * k], atol=1e-12)
+        moved = np.abs(_low_res(step, k) - step) > 1e-9
+        assert (moved.sum(1) >= k).all() and (moved.sum(1) <= 2 * k).all(), k
+    for v in ("heldout9", "tuning"):
+        for seed in range(4):
+            truth = world_frames(ErrorFamilies(), seed, 2, v).frames
+            seen = world_frames(ErrorFamilies(depth_pixel=1e-12), seed, 2, v).frames
+            same = [[np.allclose(s.depth, _low_res(t.depth, k), rtol=1e-9, equal_nan=True)
+                     for k in (2, 4)] for s, t in zip(seen, truth)]
+            if v == "heldout9":  # one factor, kept for the sequence
+                assert same[0] == same[1] and sum(same[0]) == 1, (seed, same)
+            else:
+                assert not any(same[0] + same[1]), (seed, same)
+
+    signs = set()
+    for seed in range(8):
+        truth = world_frames(ErrorFamilies(), seed, 2, "heldout9").frames
+        seen = world_frames(ErrorFamilies(nocs_field=0.03), seed, 2, "heldout9").frames
+        for t, s in zip(truth, seen):
+            np.testing.assert_array_equal(s.mask, t.mask)
+            for iid in np.unique(t.mask[t.mask > 0]):
+                m = t.mask == iid
+                if m.sum() < 200:
+                    continue
+                ys, xs = np.nonzero(m)
+                a = np.column_stack([np.ones(len(ys)), xs, ys])
+                q = t.nocs[m]
+                resid = q - a @ np.linalg.lstsq(a, q, rcond=None)[0]
+                move = s.nocs[m] - q
+                inside = ((s.nocs[m] > 0) & (s.nocs[m] < 1)).all(1)
+                big = inside[:, None] & (np.abs(resid) > 1e-3)
+                c = move[big] / resid[big]
+                assert np.ptp(c) < 1e-9 and 0 < abs(c[0]) <= 0.09 + 1e-12, (seed, iid)
+                signs.add(np.sign(c[0]))
+                affine = np.linalg.lstsq(a[inside], move[inside], rcond=None)[0]
+                assert np.abs(affine).max() < 1e-9 * max(1.0, np.abs(move).max())
+    assert signs == {-1.0, 1.0}, signs
+
+    for seed in range(4):
+        truth = world_frames(ErrorFamilies(), seed, 3, "heldout9").frames
+        late = world_frames(ErrorFamilies(nocs_pixel=1e-9), seed, 3, "heldout9").frames
+        for k, fr in enumerate(late):
+            src = truth[max(k - 1, 0)]
+            np.testing.assert_array_equal(fr.mask, src.mask)
+            np.testing.assert_allclose(fr.nocs, src.nocs, atol=1e-7)
+            np.testing.assert_array_equal(fr.depth, truth[k].depth)
+        assert np.any(truth[1].mask != truth[0].mask)
+        for k, fr in enumerate(world_frames(ErrorFamilies(), seed, 3, "heldout9").frames):
+            np.testing.assert_array_equal(fr.mask, truth[k].mask)
+
+    moved = []
+    for seed in range(12):
+        truth = world_frames(ErrorFamilies(), seed, 2, "heldout9").frames
+        seen = world_frames(ErrorFamilies(mask_px=3), seed, 2, "heldout9").frames
+        h, w = truth[0].mask.shape
+        shifts = []
+        for t, s in zip(truth, seen):
+            dx = s.principal_point[0] - t.principal_point[0]
+            dy = s.principal_point[1] - t.principal_point[1]
+            assert dx == int(dx) and dy == int(dy)
+            assert abs(dx) <= round(0.01 * w) and abs(dy) <= round(0.01 * h), (dx, dy, w, h)
+            dx, dy = int(dx), int(dy)
+            ys, xs = slice(max(dy, 0), h + min(dy, 0)), slice(max(dx, 0), w + min(dx, 0))
+            np.testing.assert_array_equal(
+                s.depth[ys, xs], t.depth[max(-dy, 0):h - max(dy, 0), max(-dx, 0):w - max(dx, 0)])
+            assert np.isnan(s.depth).sum() - np.isnan(t.depth[ys, xs]).sum() == (
+                h * w - (h - abs(dy)) * (w - abs(dx)))
+            # The rendered pixels obey the camera model under the frame's principal point.
+            cx, cy = s.principal_point
+            label = np.zeros_like(t.mask)  # the true mask, moved with the images
+            label[ys, xs] = t.mask[max(-dy, 0):h - max(dy, 0), max(-dx, 0):w - max(dx, 0)]
+            inner = (s.mask == label) & (label > 0)
+            v, u = np.nonzero(inner)
+            d = s.depth[v, u]
+            x = np.column_stack([d * (u - cx) / s.focal, d * (v - cy) / s.focal, d])
+            pose = {o.instance_id: o for o in s.objects}
+            for iid in np.unique(s.mask[inner]):
+                o, sel = pose[int(iid)], s.mask[v, u] == iid
+                pred = o.scale * (s.nocs[v[sel], u[sel]] - 0.5) @ o.rotation.T + o.translation
+                assert np.abs(pred - x[sel]).max() < 1e-9
+            shifts.append((dx, dy))
+        assert shifts[0] == shifts[1]
+        moved.append(shifts[0] != (0, 0))
+    assert 6 <= sum(moved) < 12, moved
+    for v, fam in (("tuning", ErrorFamilies(mask_px=3)), ("heldout9", ErrorFamilies())):
+        fr, clean = (world_frames(f, 0, 1, v).frames[0] for f in (fam, ErrorFamilies()))
+        assert fr.principal_point == clean.principal_point

@@ -87,6 +87,25 @@ wrong); with per-pixel NOCS noise, the NOCS image goes through JPEG at a quality
 sequence (a ROS compressed image transport: 8 bits, 8x8 blocks, chroma halved); and each
 instance's mask leaks into the background by up to the mask width and is cut by its detection
 box, each side of which misses the true box's by up to that width (straight truncations).
+A ninth (``variant="heldout9"``, fixed on 24 Nov 2026 before any evaluation on it) errs as a
+robot's pipeline around the networks does: its depth fields are fixed in the scene rather than
+in the image, an error in metres on the surface of a fused map that stays where it is as the
+camera moves (every scale, kept for the sequence); with per-pixel depth noise, the depth is
+predicted at a half or a quarter of the image's size (kept for the sequence) and brought back
+up bilinearly, mixed across every silhouette over a band that wide; each object's NOCS are
+pulled towards (or pushed from) their best affine function of the image coordinates, by a share
+of 3 times the NOCS field's strength (a network's spectral bias: the curvature of the NOCS
+across the image, which carries relief and perspective, under- or overestimated; its ramp
+kept); with per-pixel NOCS noise (a NOCS network in the loop: not the ``sensor`` preset's
+ground truth), the NOCS and masks arrive one frame late, the last frame's truth beside this
+frame's depth (the first frame's its own); its masks are eroded or dilated as the tuning
+model's; and, with mask errors, the camera's principal point is off the image centre that the
+estimator assumes by up to 1% of the image's size per axis times the mask width over 3 (whole
+pixels, kept for the sequence: the images are moved, the frame's ``principal_point`` says where
+it truly is). Every mechanism is zero-mean as the families are except two, which model a
+mismatch in the pipeline rather than a predictor's error: the late NOCS (a latency, whose error
+follows the camera's motion) and the principal point (a camera model taken for granted; its
+direction is random, its size is not zero-mean).
 """
 from __future__ import annotations
 
@@ -282,12 +301,15 @@ def _lens_row_field(rng, h, w, cells):
 
 
 VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5", "heldout6",
-            "heldout7", "heldout8")
+            "heldout7", "heldout8", "heldout9")
 # heldout7's image fields are the tuning grid's, drawn per segment (ErrorState._segments);
-# heldout8's finer ones are the tuning grid's, grown with depth (ErrorState._grown).
+# heldout8's finer ones are the tuning grid's, grown with depth (ErrorState._grown);
+# heldout9 has no image field: its depth fields are sinusoids fixed in the scene
+# (ErrorState._scene_field), its NOCS distortion a pull towards a ramp (_ramp_pull).
 _FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field,
            "heldout3": _poly_field, "heldout4": _ring_field, "heldout5": _tile_field,
-           "heldout6": _lens_row_field, "heldout7": _grid_field, "heldout8": _grid_field}
+           "heldout6": _lens_row_field, "heldout7": _grid_field, "heldout8": _grid_field,
+           "heldout9": _grid_field}
 # heldout8's familiar-size cue: the typical size (bounding-box diagonal, m; the geometric mean
 # of SceneSpec's range) and the spread of log sizes that one unit of the field stands for.
 _TYPICAL_SIZE = 0.17
@@ -427,6 +449,51 @@ class ErrorState:
         h, w = frame.mask.shape
         return self._field(("depth", cells), rng, h, w, cells) * _depth_growth(frame)
 
+    def _scene_field(self, rng, frame, cells):
+        """A field fixed in the scene, as the surface of a fused map is wrong (a depth image
+        rendered from a TSDF or mesh that the robot built over the sequence): four random
+        sinusoids of the 3D point each pixel of ``frame``'s truth sees, in the first frame's
+        camera coordinates (the scene's motion since then, from any object's true pose, undone),
+        about ``cells`` periods across the view at the objects' median distance, unit std over
+        the first frame's objects (over its finite pixels if it has none); kept for the
+        sequence (a map's error does not renew with the view, so ``field_drift`` does not act
+        on it). Returned as the relative error of an additive one in metres: the field times
+        the first frame's median object depth over each pixel's true depth; 0 where the depth
+        is not finite."""
+        h, w = frame.mask.shape
+        depth = frame.depth
+        ok = np.isfinite(depth)
+        cx, cy = frame.principal_point
+        vv, uu = np.mgrid[0:h, 0:w]
+        z = np.where(ok, depth, 0.0)
+        pts = np.stack([z * (uu - cx) / frame.focal, z * (vv - cy) / frame.focal, z], -1)
+        ref = min(frame.objects, key=lambda o: o.instance_id) if frame.objects else None
+        first = self._kept("scene", lambda: (
+            None if ref is None else (ref.instance_id, np.array(ref.rotation),
+                                      np.array(ref.translation, float)),
+            float(np.median(depth[ok & (frame.mask > 0)])) if np.any(ok & (frame.mask > 0))
+            else float(np.median(depth[ok])) if ok.any() else 1.0))
+        (anchor, zref) = first
+        if anchor is not None:
+            now = {o.instance_id: o for o in frame.objects}.get(anchor[0])
+            if now is not None:  # x0 = R0 Rk^T (x - tk) + t0
+                rel = anchor[1] @ np.asarray(now.rotation).T
+                pts = (pts - np.asarray(now.translation, float)) @ rel.T + anchor[2]
+
+        def draw():
+            extent = zref * max(h, w) / frame.focal
+            k = rng.normal(size=(4, 3)) * cells * np.pi / extent
+            phase = rng.uniform(0, 2 * np.pi, 4)
+            amp = rng.normal(size=4)
+            on = ok & (frame.mask > 0) if np.sum(ok & (frame.mask > 0)) > 1 else ok
+            v = np.cos(pts[on] @ k.T + phase) @ amp
+            return k, phase, amp, max(float(v.std()), 1e-9) if on.sum() > 1 else 1.0
+
+        k, phase, amp, norm = self._kept(("scene", cells), draw)
+        g = np.zeros((h, w))
+        g[ok] = (np.cos(pts[ok] @ k.T + phase) @ amp) / norm * zref / depth[ok]
+        return g
+
     def _object(self, iid, rng):
         """Per-object errors: the shape mismatch persists, the relief error drifts slowly."""
         e = self.err
@@ -447,15 +514,21 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
     depth, nocs, mask = frame.depth.copy(), frame.nocs.copy(), frame.mask.copy()
     h, w = depth.shape
     finite = np.isfinite(depth)
+    if state.variant == "heldout9" and e.nocs_pixel > 0:
+        # The NOCS network a frame behind the depth: its NOCS and masks are the last frame's.
+        last = state.fields.get("late")
+        state.fields["late"] = (frame.nocs, frame.mask)
+        if last is not None and last[1].shape == mask.shape:
+            nocs, mask = last[0].copy(), last[1].copy()
     obj = mask > 0
-    # Per-object geometry errors first: relief about the object's median depth, NOCS shape
-    # mismatch.
-    for iid in np.unique(mask[obj]):
+    # Per-object geometry errors first: relief about the object's median (true) depth, NOCS
+    # shape mismatch (over the instance's mask, which only heldout9's lag makes another).
+    for iid in np.union1d(np.unique(frame.mask[frame.mask > 0]), np.unique(mask[obj])):
         m = mask == iid
         ob = state._object(int(iid), rng)
-        if ob["relief"]:
-            zc = np.median(depth[m])
-            depth[m] = zc + (1.0 + ob["relief"]) * (depth[m] - zc)
+        if ob["relief"] and np.any(t := frame.mask == iid):
+            zc = np.median(depth[t])
+            depth[t] = zc + (1.0 + ob["relief"]) * (depth[t] - zc)
         if e.shape > 0:
             nocs[m] = 0.5 + (nocs[m] - 0.5) * ob["shape"]
     if e.edge_px > 0:
@@ -520,6 +593,9 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             # The coarsest scale is the familiar-size cue, the rest grow with depth.
             total = state._familiar(rng, frame) + sum(
                 state._grown(rng, frame, c) for c in e.field_cells[1:])
+        elif state.variant == "heldout9":
+            # Every scale fixed in the scene, additive in metres.
+            total = sum(state._scene_field(rng, frame, c) for c in e.field_cells)
         else:
             total = sum(state._field(("depth", c), rng, h, w, c) for c in e.field_cells)
         depth *= 1.0 + e.field * total / np.sqrt(len(e.field_cells))
@@ -540,6 +616,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             nocs = _crop_stretch(nocs, frame, state, rng, e.nocs_field)
         elif state.variant == "heldout8":
             nocs = _azimuth_stretch(nocs, mask, frame, state, rng, e.nocs_field)
+        elif state.variant == "heldout9":
+            nocs = _ramp_pull(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout":
             # Scaled to ``nocs_field`` rms on the objects, as the other variants' distortions:
             # unscaled, q^T W q with |q| < 0.5 moved the NOCS 8x less than the tuning field.
@@ -570,6 +648,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
     depth[~np.isfinite(depth) | (depth <= 0)] = np.nan
     if state.variant == "heldout8" and e.depth_pixel > 0:
         depth = _disparity8(depth)
+    if state.variant == "heldout9" and e.depth_pixel > 0:
+        depth = _low_res(depth, state._kept("low_res", lambda: int(rng.choice([2, 4]))))
     nocs[mask > 0] = np.clip(nocs[mask > 0], 0.0, 1.0)
     if state.variant == "heldout4" and e.nocs_pixel > 0:
         nocs = np.round(nocs * 255.0) / 255.0  # as an rgb8 NOCS image holds them
@@ -580,6 +660,15 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         nocs[mask == 0] = 0.0
         nocs = _jpeg(nocs, state._kept("jpeg", lambda: int(rng.integers(75, 96))))
     nocs[mask == 0] = 0.0
+    if state.variant == "heldout9" and e.mask_px > 0:
+        # The camera's principal point is not the image centre the estimator assumes.
+        dx, dy = state._kept("principal", lambda: tuple(
+            int(v) for v in np.round(rng.uniform(-1, 1, 2) * 0.01 * e.mask_px / 3 * [w, h])))
+        depth, nocs, mask = (_shifted(depth, dx, dy, np.nan), _shifted(nocs, dx, dy, 0.0),
+                             _shifted(mask, dx, dy, 0))
+        cx, cy = frame.principal_point
+        return replace(frame, depth=depth, nocs=nocs, mask=mask, principal_point=(cx + dx,
+                                                                                 cy + dy))
     return replace(frame, depth=depth, nocs=nocs, mask=mask)
 
 
@@ -811,6 +900,51 @@ def _azimuth_stretch(nocs, mask, frame, state, rng, rms):
     return out
 
 
+def _low_res(depth, k):
+    """``depth`` as a network run at 1 / ``k`` of the image's size gives it: area-averaged down
+    to that size over the finite pixels, then brought back up bilinearly (NaN where under half
+    of what is interpolated was finite): depth mixed across every silhouette over a band about
+    ``k`` pixels wide, relief finer than ``k`` pixels smoothed away."""
+    h, w = depth.shape
+    ok = np.isfinite(depth)
+    small = (max(w // k, 1), max(h // k, 1))
+    num = cv2.resize(np.where(ok, depth, 0.0), small, interpolation=cv2.INTER_AREA)
+    den = cv2.resize(ok.astype(np.float64), small, interpolation=cv2.INTER_AREA)
+    num = cv2.resize(num, (w, h), interpolation=cv2.INTER_LINEAR)
+    den = cv2.resize(den, (w, h), interpolation=cv2.INTER_LINEAR)
+    return np.where(den >= 0.5, num / np.maximum(den, 1e-12), np.nan)
+
+
+def _ramp_pull(nocs, mask, state, rng, rms):
+    """Each object's NOCS pulled towards (or pushed from: a sign per object for the sequence)
+    their best affine function of the image coordinates over its mask, by a share 3 ``rms``
+    (+-9% at the base bound, as the relief and shape families' +-10%): a NOCS network with a
+    spectral bias, which under- or overestimates how the NOCS curve across the image (the
+    curvature that carries the object's relief and the perspective), while the ramp across
+    the object, its extent and its tilt, stay."""
+    out = nocs.copy()
+    for iid in np.unique(mask[mask > 0]):
+        m = mask == iid
+        ys, xs = np.nonzero(m)
+        if len(ys) < 4:
+            continue
+        a = np.column_stack([np.ones(len(ys)), xs - xs.mean(), ys - ys.mean()])
+        ramp = a @ np.linalg.lstsq(a, nocs[m], rcond=None)[0]
+        out[m] = nocs[m] - state._sign(("ramp", int(iid)), rng) * 3.0 * rms * (nocs[m] - ramp)
+    return out
+
+
+def _shifted(img, dx, dy, fill):
+    """``img`` moved by ``dx`` pixels right and ``dy`` down (integers), ``fill`` where it
+    uncovers: what a camera whose principal point is off the image centre by (dx, dy) sees,
+    against one whose is on it."""
+    out = np.full_like(img, fill)
+    h, w = img.shape[:2]
+    src = img[max(-dy, 0):h - max(dy, 0), max(-dx, 0):w - max(dx, 0)]
+    out[max(dy, 0):max(dy, 0) + src.shape[0], max(dx, 0):max(dx, 0) + src.shape[1]] = src
+    return out
+
+
 def _boxed(m, px, rng):
     """Instance mask m as a box-based detector's mask head gives it: grown by 0..``px`` pixels
     (the head's leak into the background) and cut by its detection box, each side of which is
@@ -890,7 +1024,8 @@ def _mask_errors(mask, nocs, px, rng, variant, state=None):
     """Erode or dilate (``heldout2``: shift; ``heldout3``: fray; ``heldout4``: outline as a
     polygon with holes; ``heldout5``: fill to the convex hull; ``heldout6``: through a 28x28
     mask head; ``heldout7``: by a width kept for the sequence in ``state``, then bleed into
-    touching instances; ``heldout8``: grow and cut by a detection box) each instance by up to
+    touching instances; ``heldout8``: grow and cut by a detection box; ``heldout9``: as the
+    tuning variant) each instance by up to
     ``px``
     pixels; grown pixels keep the background depth and take the nearest object's NOCS, as a
     segmentation network's would."""
