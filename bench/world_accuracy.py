@@ -77,7 +77,7 @@ from fcop_ros.core import PAPER_FCOP_IS, EstimatorOptions
 from fcop_ros.core.camera import image_centre
 from fcop_ros.core.stabbing import focal_intervals
 from fcop_ros.synthetic.world import (PIPE_FAMILIES, WORLD_PRESETS, ZERO_MEAN_FAMILIES,
-                                     world_frame, world_frames)
+                                     ErrorFamilies, _jpeg, world_frame, world_frames)
 from fcop_ros.tools.cli import HelpFormatter
 # bench/peers.py: the script's own folder is on the path when run as a script
 from peers import p4pf
@@ -284,30 +284,30 @@ def jpeg_parts(frames, first_seed, variant, quality=85):
     its base bound) sent raw, rounded to 8 bits, through JPEG at ``quality`` with the colour kept
     whole (4:4:4) or halved (4:2:0, as ROS's compressed transport sends it), and the last with
     the masks eroded by 3 px instead of 1 (were the error only at the silhouettes, that would
-    remove it)."""
-    from fcop_ros.synthetic.world import ErrorFamilies, _jpeg
-
-    kinds = {"raw": lambda n: n, "8 bits": lambda n: np.round(n * 255.0) / 255.0,
-             "JPEG 4:4:4": lambda n: _jpeg(n, quality, full_chroma=True),
-             "JPEG 4:2:0": lambda n: _jpeg(n, quality),
-             "JPEG 4:2:0, erode_px 3": lambda n: _jpeg(n, quality)}
-    print(f"\n| the NOCS image (noise alone, quality {quality}) | signed median % "
-          "(standard error) | median abs error % |")
-    print("|---|---|---|")
+    remove it). Each frame is made once and sent every way."""
+    eroded = replace(OPTIONS, erode_px=3)
+    ways = {"raw": (lambda n: n, OPTIONS),
+            "8 bits": (lambda n: np.round(n * 255.0) / 255.0, OPTIONS),
+            "JPEG 4:4:4": (lambda n: _jpeg(n, quality, full_chroma=True), OPTIONS),
+            "JPEG 4:2:0": (lambda n: _jpeg(n, quality), OPTIONS),
+            "JPEG 4:2:0, erode_px 3": (lambda n: _jpeg(n, quality), eroded)}
     noisy = ErrorFamilies(nocs_pixel=WORLD_PRESETS["only_nocs_pixel"].nocs_pixel)
-    for kind, send in kinds.items():
-        opts = OPTIONS if "erode" not in kind else replace(OPTIONS, erode_px=3)
-        err = []
-        for s in range(frames):
-            fr = world_frame(noisy, first_seed + s, variant, objects=OBJECTS)
+    err = {way: [] for way in ways}
+    for s in range(frames):
+        fr = world_frame(noisy, first_seed + s, variant, objects=OBJECTS)
+        for way, (send, opts) in ways.items():
             nocs = send(fr.nocs)
             nocs[fr.mask == 0] = 0.0
             est = estimate_focal(fr.depth, nocs, fr.mask, seed=s, poses=False, options=opts)
             if est.focal is not None:
-                err.append(100 * np.log(est.focal / fr.focal))
-        err = np.array(err)
-        print(f"| {kind} | {np.median(err):+.2f} ({_median_standard_error(err):.2f}) | "
-              f"{np.median(np.abs(err)):.2f} |", flush=True)
+                err[way].append(100 * np.log(est.focal / fr.focal))
+    print(f"\n| the NOCS image (noise alone, quality {quality}) | signed median % "
+          "(standard error) | median abs error % |")
+    print("|---|---|---|")
+    for way, e in err.items():
+        e = np.array(e)
+        print(f"| {way} | {np.median(e):+.2f} ({_median_standard_error(e):.2f}) | "
+              f"{np.median(np.abs(e)):.2f} |", flush=True)
 
 
 def weights(presets, frames, first_seed, variant):
