@@ -305,9 +305,11 @@ def test_nocs_convention_focal_and_pose(harness, convention, data, right):
     """The README's figures: on camera_frame(0..2), 15 objects at 600 px, the wrong convention
     leaves the focal at 600.00 px; 10 objects fit only as a mirror image and get no pose, the
     other 5 (shapes whose mirror image is a rotation of them) get poses 53-155 degrees off (or,
-    now and then, one of them none)."""
+    now and then, one of them none). The seed is fixed: with triplets from the OS, one run in
+    about 50 flags a symmetric shape mirrored too (11), and CI once saw 9."""
     h = harness(parameter_overrides=[Parameter("nocs_convention", value=convention),
-                                     Parameter("max_uncertainty", value=1.0)])
+                                     Parameter("max_uncertainty", value=1.0),
+                                     Parameter("seed", value=7)])
     posed, rot = 0, []
     for k in range(3):
         fr = cam(k)
