@@ -275,7 +275,8 @@ def test_votes_all_outside_focal_range_are_named_as_such(numba, monkeypatch):
 
 def test_object_extents_follow_a_zoom_and_leave_out_cut_objects():
     """Ten sensor-preset scenes seen at f and 1.25 f from the same place: the median object's
-    extent (RMS image radius x median depth) grows by 1.270 (per frame 1.14-1.31), and no
+    extent (RMS image radius x median depth) grows by 1.255 (per frame 1.22-1.31; 1.270 and
+    1.14-1.31 before the world's principal point left the image centre), and no
     object whose mask reaches the image's edge has one (a zoom cuts such objects, not scales
     them: seed 41 gave 0.96 and 0.97 for two of them)."""
     from fcop_ros.synthetic.world import world_frames
@@ -292,8 +293,10 @@ def test_object_extents_follow_a_zoom_and_leave_out_cut_objects():
                 assert rows.min() > 0 and cols.min() > 0 and rows.max() < h - 1
                 assert cols.max() < w - 1
         common = [i for i in before.object_extents if i in after.object_extents]
-        ratios.append(np.median([after.object_extents[i] / before.object_extents[i]
-                                 for i in common]))
+        if common:  # seed 43's two objects: both cut by the edge once zoomed
+            ratios.append(np.median([after.object_extents[i] / before.object_extents[i]
+                                     for i in common]))
+    assert len(ratios) == 9
     assert abs(np.median(ratios) - 1.25) < 0.03
     assert 1.1 < min(ratios) and max(ratios) < 1.35
 

@@ -89,7 +89,9 @@ def test_window_averages_on_moving_camera():
 def test_zoom_on_the_world_short_of_the_aim():
     """Eight zoom sequences of the predicted preset (seeds 7600-7603, x1.25 and x0.8 at frame 20
     of 40, window of 30): frames until the window is within 5% of the new focal length for
-    good, counted from the zoom (20: never). Measured 20, 20, 1, 1, 1, 1, 20, 1 and seven
+    good, counted from the zoom (20: never). Measured 20, 4, 6, 2, 1, 1, 20, 3, seven changes
+    and five carried (the same without the principal point's term), since the world's principal
+    point left the image centre; before, 20, 20, 1, 1, 1, 1, 20, 1 and seven
     changes detected (six at frame 21, one at 30): the objects' extents show the zoom at its
     second frame, and at six of the seven the window keeps its older frames at the zoom the
     radii measure (0.765-0.800 for 0.8, 1.249-1.269 for 1.25). Restarting instead (until this
@@ -112,7 +114,7 @@ def test_zoom_on_the_world_short_of_the_aim():
                 if k >= 20 and (r.focal is None or abs(np.log(r.focal / fr.focal)) > 0.05):
                     bad.append(k - 20)
             delays.append(bad[-1] + 1 if bad else 0)
-    assert sum(d <= 15 for d in delays) >= 5 and max(d for d in delays if d < 20) == 1
+    assert sum(d <= 15 for d in delays) >= 6 and max(d for d in delays if d < 20) <= 6
     assert changes >= 6 and carried >= 5
 
 
@@ -185,8 +187,11 @@ def test_a_frame_refused_early_with_a_lost_channel_names_it(preset, seed, channe
 def test_one_object_s_flat_nocs_refuse_that_object_not_the_frame():
     """A network that fails on one instance (its NOCS flat, the others right): the frame answers
     from the others. Measured on these 10 frames, the largest object's z channel flattened: 9
-    answer, within -3.7..+8.1% (the same frames intact: -3.1..+5.0%); the tenth had no other
-    object its NOCS explain."""
+    answer, within -5.3..+10.5% (the same frames intact: -3.7..+8.1%); the tenth had no other
+    object its NOCS explain. (Before the world's principal point left the image centre: 9, within
+    -3.7..+8.1%, intact -3.1..+5.0%. The fourth frame's -5.3% is -1.4% without the principal
+    point's term: of its two objects, one moves 5% in f per pixel of the principal point, so the
+    frame follows the other.)"""
     answered = []
     for s in range(10):
         fr = frame("predicted", s)
@@ -198,7 +203,7 @@ def test_one_object_s_flat_nocs_refuse_that_object_not_the_frame():
         assert largest in est.rejected
         if est.focal is not None:
             answered.append(abs(np.log(est.focal / fr.focal)))
-    assert len(answered) >= 8 and max(answered) < 0.1
+    assert len(answered) >= 8 and max(answered) < 0.12
 
 
 def test_reflections_and_axis_permutations_leave_the_focal_unchanged():
@@ -258,3 +263,30 @@ def test_ten_thousand_instances_are_answered_with_linear_work():
     assert est.instances_skipped == 10_000 - 64
     assert est.focal is None or est.std_rel is not None
     assert elapsed < 60  # a generous ceiling against the quadratic behaviour, not a speed test
+
+
+def test_an_assumed_principal_point_is_estimated_from_the_objects_and_its_doubt_reported():
+    """Tuning-world `sensor` frames (seeds 7000-7059), whose principal points lie up to 2% of
+    the image off its centre (rms 0.67% per axis), estimated at the centre as the node does
+    without camera_info_in. Without the principal point's term (principal_point_std 0):
+    measured median |e| 0.141%, coverage of 2 std_rel 75%. With it (the default 0.75%): the
+    objects' disagreement moves the principal point and f with it, 0.072% and 95%. Given the
+    true principal point: 0.0045% and no principal-point term at all."""
+    def run(options=None, given=False):
+        err, cover, parts = [], [], []
+        for s in range(60):
+            fr = frame("sensor", s)
+            est = estimate_focal(fr.depth, fr.nocs, fr.mask,
+                                 fr.principal_point if given else None, options, seed=s,
+                                 poses=False)
+            err.append(abs(np.log(est.focal / fr.focal)))
+            cover.append(err[-1] <= 2 * est.std_rel)
+            parts.append(est.std_rel_principal_point)
+        return np.median(err), np.mean(cover), np.array(parts)
+
+    e0, c0, p0 = run(EstimatorOptions(principal_point_std=0.0))
+    e1, c1, p1 = run()
+    e2, _, p2 = run(given=True)
+    assert np.all(p0 == 0) and np.all(p2 == 0) and np.all(p1 > 0)
+    assert c0 < 0.8 and 0.9 <= c1 <= 0.98
+    assert e1 < 0.7 * e0 and e2 < 0.1 * e1

@@ -37,6 +37,7 @@ from .correspondences import (
 from .error_model import depth_influence, object_variances
 from .object_fit import _plain_rows, fit_objects
 from .pose import ObjectPose, umeyama
+from .principal_point import focal_gradients, principal_point_offset
 from .solver import object_votes, solve_triplets
 from .options import EstimatorOptions
 from .stabbing import interval_stabbing, stab_equal_width
@@ -61,9 +62,14 @@ class FocalEstimate:
     frame draws anew (the rest, from shape mismatch, unseen depth error and the objects'
     disagreement, repeats while the same objects are in view). std_rel_prior: the part of
     std_rel that stands in for the disagreement a frame of few objects cannot show (the prior
-    spread ``object_tau``; a frame of one object pays it whole). focal_votes: the stabbed value of
-    the triplet votes. interval: (lo, hi) focal range in pixels of the maximal consensus region.
-    inlier_count / inlier_ratio: votes agreeing with it. votes_per_object / inliers_per_object:
+    spread ``object_tau``; a frame of one object pays it whole). std_rel_principal_point: the
+    part of std_rel that the principal point's uncertainty makes (none where it is given; the
+    frame's objects move f with it, each by its own gradient, and it persists from frame to
+    frame). principal_point_offset: (dx, dy) px, where the objects' disagreement puts an
+    assumed principal point relative to it (their focal lengths are corrected by it; None where
+    the principal point is given). focal_votes: the stabbed value of the triplet votes.
+    interval: (lo, hi) focal range in pixels of the maximal consensus region. inlier_count /
+    inlier_ratio: votes agreeing with it. votes_per_object / inliers_per_object:
     {instance_id: count}. object_focals: {instance_id: (focal, std_rel, std_rel_noise)} of the
     objects combined; rejected: {instance_id: why} of instances not used; mirrored: instance ids
     whose NOCS fit only as a reflection (channel order or axis convention); instances_skipped:
@@ -95,6 +101,8 @@ class FocalEstimate:
     std_rel: float | None = None
     std_rel_noise: float | None = None
     std_rel_prior: float | None = None
+    std_rel_principal_point: float | None = None
+    principal_point_offset: tuple[float, float] | None = None
     votes_per_object: dict = field(default_factory=dict)
     inliers_per_object: dict = field(default_factory=dict)
     object_focals: dict = field(default_factory=dict)
@@ -573,6 +581,7 @@ def estimate_focal(
     *,
     seed=None,
     poses: bool = True,
+    principal_point_std=None,
 ) -> FocalEstimate:
     """Estimate the focal length (pixels, fx = fy) of one frame and the poses of its objects.
 
@@ -583,6 +592,9 @@ def estimate_focal(
         nocs: (H,W,3) NOCS in [0,1]; all-zero pixels have no prediction.
         mask: (H,W) integer instance ids, 0 = background.
         principal_point: (cx, cy) pixels; default ((W-1)/2, (H-1)/2).
+        principal_point_std: (sx, sy) pixels, how far the principal point may be off; default
+            none for a given ``principal_point``, ``options.principal_point_std`` of the
+            image's width and height for the assumed centre. It widens std_rel only.
         options: an :class:`EstimatorOptions` (default: fcop_ros's settings;
             ``PAPER_FCOP_IS``: the paper's method taken literally).
         seed: of the random triplets and pixel subsets (None: from the OS).
@@ -602,6 +614,7 @@ def estimate_focal(
         image_centre(w, h) if principal_point is None
         else checked_principal_point(principal_point, w, h)
     )
+    pp_std = _principal_point_std(principal_point, principal_point_std, opt, w, h)
     rng = np.random.default_rng(seed)
     base = dict(principal_point=pp, image_size=(w, h), method=opt.method)
     share, sampled, low, high, level = _frame_checks(depth, nocs, mask)
@@ -749,28 +762,35 @@ def estimate_focal(
         est.reason = ("no object whose NOCS explain its shape: " + "; ".join(why[:8]) + more
                       + _lost_channel_hint(instances))
         return est
-    # Errors that repeat in every frame show in no residual: their share of each object's
-    # variance follows from the fit's lean on depth and on the NOCS (.error_model).
     raw_spread = np.array([_nocs_spread(i.p) for i in instances])
-    relief_lean = depth_influence(support, fits, opt.fit_pixels, opt.depth_tilt)[:, 0]
-    var = object_variances(support, fits, good, spread, raw_spread, relief_lean, opt)
-    # The objects' prior spread stands for the depth network's errors of each object's relief,
-    # which move f by the fits' lean on depth: about one for one with noisy NOCS, almost nothing
-    # when exact NOCS let the pixels fix f.
-    lean = relief_lean[good & np.isfinite(relief_lean)]
-    tau0 = opt.object_tau * (float(np.sqrt(np.mean(lean**2))) if lean.size else 1.0)
-    comb = combine_objects(np.log(fits.focal[good]), var[good], fits.var_log_focal[good], tau0,
+    var, tau0 = _object_budgets(support, fits, good, spread, raw_spread, opt)
+    logf = np.log(fits.focal)
+    grads, pp_cov = np.zeros((len(support), 2)), np.zeros((2, 2))
+    if np.any(pp_std > 0):
+        # The offset of an assumed principal point that the objects' disagreement shows: their
+        # focal lengths corrected by it, its remaining uncertainty into std_rel (.principal_point).
+        grads = focal_gradients(support, f0, seed, pp_std, opt)
+        delta, pp_cov = principal_point_offset(logf[good], var[good] + tau0**2, grads[good],
+                                               pp_std)
+        logf = logf - grads @ delta
+        est.principal_point_offset = (float(delta[0]), float(delta[1]))
+    comb = combine_objects(logf[good], var[good], fits.var_log_focal[good], tau0,
                            opt.object_tau_weight)
     if comb is None:
         est.reason = "no finite per-object estimate"
         return est
     kept = [inst for inst, g in zip(support, good) if g]
+    var_pp_obj = np.einsum("oi,ij,oj->o", grads, pp_cov, grads)
+    idx_used = np.flatnonzero(good)[comb.used]
+    w_noise = 1.0 / np.minimum(fits.var_log_focal[idx_used], var[idx_used])
+    g_frame = (w_noise[:, None] * grads[idx_used]).sum(0) / w_noise.sum()
+    var_pp = float(g_frame @ pp_cov @ g_frame)
     for k, (inst, used) in enumerate(zip(kept, comb.used)):
         j = np.flatnonzero(good)[k]
         if used:
             est.object_focals[inst.instance_id] = (
-                float(fits.focal[j]),
-                float(np.sqrt(var[j])),
+                float(np.exp(logf[j])),
+                float(np.sqrt(var[j] + var_pp_obj[j])),
                 float(np.sqrt(fits.var_log_focal[j])),  # var[j] adds to it (.error_model)
             )
         else:
@@ -784,9 +804,37 @@ def estimate_focal(
     ]
     est.std_rel_noise = float(np.sqrt(comb.noise))
     est.std_rel_prior = float(np.sqrt(max(comb.prior, 0.0)))
+    est.std_rel_principal_point = float(np.sqrt(var_pp))
     combined = [inst for inst, u in zip(kept, comb.used) if u]
-    return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var)), used, opt, rng, poses,
-                   combined)
+    return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var + var_pp)), used, opt,
+                   rng, poses, combined)
+
+
+def _object_budgets(support, fits, good, spread, raw_spread, opt: EstimatorOptions):
+    """(each object's variance of log f, the prior spread between objects tau0) of the fitted
+    objects ``good``."""
+    # Errors that repeat in every frame show in no residual: their share of each object's
+    # variance follows from the fit's lean on depth and on the NOCS (.error_model).
+    relief_lean = depth_influence(support, fits, opt.fit_pixels, opt.depth_tilt)[:, 0]
+    var = object_variances(support, fits, good, spread, raw_spread, relief_lean, opt)
+    # The objects' prior spread stands for the depth network's errors of each object's relief,
+    # which move f by the fits' lean on depth: about one for one with noisy NOCS, almost nothing
+    # when exact NOCS let the pixels fix f.
+    lean = relief_lean[good & np.isfinite(relief_lean)]
+    tau0 = opt.object_tau * (float(np.sqrt(np.mean(lean**2))) if lean.size else 1.0)
+    return var, tau0
+
+
+def _principal_point_std(given, std, opt: EstimatorOptions, w: int, h: int) -> np.ndarray:
+    """(sx, sy) pixels: ``std`` where the caller says it, else none for a given principal point
+    and ``opt.principal_point_std`` of the image's width and height for the assumed centre."""
+    if std is None:
+        std = (0.0, 0.0) if given is not None else (opt.principal_point_std * w,
+                                                    opt.principal_point_std * h)
+    out = np.asarray(std, dtype=np.float64).reshape(-1)
+    if out.shape != (2,) or not np.all(np.isfinite(out)) or np.any(out < 0):
+        raise ValueError(f"principal_point_std must be two finite pixels >= 0, got {std!r}")
+    return out
 
 
 def _finish(

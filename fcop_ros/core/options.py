@@ -84,7 +84,9 @@ class EstimatorOptions:
     objects of one frame show beyond their own budgets, times the objects' rms derivative of
     log f by relief) worth ``object_tau_weight`` objects: a frame of one object, which no other
     can contradict, pays it whole. No pose for an object whose own std_rel exceeds
-    ``pose_max_std``.
+    ``pose_max_std``. ``principal_point_std``: how far the principal point, where it is assumed
+    at the image centre, may be off (a fraction of the image's width and height, per axis); it
+    widens std_rel through each object's gradient of f by the principal point.
 
     ``method``: "stabbing" (triplet votes and interval stabbing, as the paper's fCOP-IS, then
     the refinement above unless ``refine=False``; ``PAPER_FCOP_IS`` is the paper's method taken
@@ -119,6 +121,9 @@ class EstimatorOptions:
     object_tau: float = 0.066
     object_tau_weight: float = 2.0
     pose_max_std: float = 0.25
+    # The rms of REAL275's camera's offsets (0.5% and 1.0% of width and height), the one real
+    # camera the tuning world is calibrated against.
+    principal_point_std: float = 0.0075
     method: str = "stabbing"
     ransac_hypotheses: int = 400
     ransac_threshold: float = 0.005
@@ -163,6 +168,7 @@ _EST_NUMBERS = {
     "edge_sigma": (0.0, np.inf), "unseen_depth_error": (0.0, np.inf),
     "shape_error": (0.0, np.inf), "object_tau": (0.0, np.inf),
     "object_tau_weight": (0.0, np.inf), "pose_max_std": (0.0, np.inf),
+    "principal_point_std": (0.0, 0.5),
     "ransac_threshold": (1e-12, np.inf),
 }
 # ... of which these must also be finite.

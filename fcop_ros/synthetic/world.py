@@ -17,6 +17,9 @@ Named presets (``WORLD_PRESETS``):
 - ``only_nocs_jpeg``, ``predicted_nocs_jpeg``: the NOCS image through JPEG (a pipe, not a
   predictor: not zero-mean, in no other preset), alone and on top of ``predicted``, so that
   what a compressed image transport does is measured on tuning frames.
+- ``only_principal_point``: the camera's principal point off the image centre alone (both
+  presets above have it too: a camera whose intrinsics are unknown has an unknown principal
+  point as well).
 
 The older fixed presets of :mod:`fcop_ros.synthetic.noise` (``mild``, ``moderate``, ``harsh``)
 are fixed settings of these same mechanisms: each is written once, in :func:`apply_errors`.
@@ -114,6 +117,7 @@ from dataclasses import dataclass, field, fields, replace
 import cv2
 import numpy as np
 
+from ..core.camera import image_centre
 from .render import Frame, random_scene, render
 
 
@@ -133,7 +137,13 @@ class ErrorFamilies:
     dilation; blobs: spurious instances with random NOCS; nocs_jpeg: the NOCS image sent as JPEG
     (ROS's compressed image transport) at a quality drawn in 75..95 per sequence, a switch that
     no preset turns on (its error is not zero-mean: at the silhouettes the NOCS ring and are
-    pulled towards the black background), for choosing a defence on tuning frames.
+    pulled towards the black background), for choosing a defence on tuning frames;
+    principal_point: the camera's principal point off the image centre the estimator assumes,
+    per axis by up to this share of the image's size (a strength uniform in [0, bound] times a
+    uniform direction in [-1, 1] per axis, kept for the sequence, sub-pixel: the scene is
+    rendered through that camera and the frame's ``principal_point`` says where it is). It is
+    drawn from a generator of its own, so that the other families' draws stay as they were, and
+    only in the tuning model (``heldout9`` moves it its own way).
     """
 
     depth_scale: float = 0.0
@@ -153,12 +163,13 @@ class ErrorFamilies:
     mask_px: int = 0
     blobs: int = 0
     nocs_jpeg: bool = False
+    principal_point: float = 0.0
 
     def scaled(self, k: float) -> "ErrorFamilies":
         """Every continuous strength times k (integers and the field scales unchanged)."""
         return replace(self, **{f.name: getattr(self, f.name) * k for f in fields(self)
                                 if isinstance(getattr(self, f.name), float)
-                                and f.name != "field_drift"})
+                                and f.name not in ("field_drift", "principal_point")})
 
     def draw(self, rng: np.random.Generator) -> "ErrorFamilies":
         """The strengths of one sequence: each family uniform in [0, bound] (integers inclusive;
@@ -166,8 +177,8 @@ class ErrorFamilies:
         out = {}
         for f in fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, bool) or isinstance(v, tuple):
-                out[f.name] = v
+            if isinstance(v, bool) or isinstance(v, tuple) or f.name == "principal_point":
+                out[f.name] = v  # the principal point's own generator draws it
             elif f.name == "field_drift":  # a depth network errs anew in every view, more or less
                 out[f.name] = float(rng.uniform(v / 3, v))
             elif isinstance(v, int):
@@ -180,12 +191,16 @@ class ErrorFamilies:
 ZERO_MEAN_FAMILIES = ("field", "relief", "offset", "depth_pixel", "nocs_pixel",
                       "nocs_field", "shape")
 
+# A camera's principal point is rarely exactly at the image centre (REAL275's: 0.5% and 1.0%
+# of width and height off it); no gain scales it.
+_PRINCIPAL_POINT = 0.02
 _SENSOR = ErrorFamilies(depth_scale=0.0, field=0.01, field_drift=0.6, relief=0.0, offset=0.004,
-                        depth_pixel=0.004, edge_px=2, flying=0.5, mask_px=2)
+                        depth_pixel=0.004, edge_px=2, flying=0.5, mask_px=2,
+                        principal_point=_PRINCIPAL_POINT)
 _PREDICTED = ErrorFamilies(depth_scale=0.15, field=0.05, field_drift=0.6, relief=0.10, offset=0.02,
                            depth_pixel=0.005, edge_px=3, flying=0.3, nocs_pixel=0.04,
                            nocs_field=0.03, nocs_outliers=0.05, nocs_blur_px=3, shape=0.10,
-                           mask_px=3, blobs=2)
+                           mask_px=3, blobs=2, principal_point=_PRINCIPAL_POINT)
 # Scale factors of the two presets, calibrated so that the paper's method taken literally scores
 # near the paper's REAL275 figures (bench/world_calibration.py prints the fit).
 SENSOR_GAIN = 1.0
@@ -201,6 +216,7 @@ for _name in ZERO_MEAN_FAMILIES:
     WORLD_PRESETS[f"only_{_name}"] = ErrorFamilies(
         **{_name: _bound}, **({"field_drift": 0.6} if _name == "field" else {})
     )
+WORLD_PRESETS["only_principal_point"] = ErrorFamilies(principal_point=_PRINCIPAL_POINT)
 # Errors of the pipes between the predictors and the estimator, not zero-mean and in no preset:
 # each alone, and the `predicted` preset with it.
 PIPE_FAMILIES = ("nocs_jpeg",)
@@ -1106,6 +1122,7 @@ def world_frames(preset: str | ErrorFamilies, seed: int, n_frames: int = 1,
     objs, f, (centre, up), (w, h) = world_scene(rng, spec, focal, size, objects)
     errors = fam.draw(rng)
     state = ErrorState.start(errors, rng, variant)
+    pp = _principal_point(errors.principal_point if variant == "tuning" else 0.0, seed, w, h)
     out = []
     for k in range(n_frames):
         R = Rotation.from_rotvec(np.radians(orbit_deg * k) * up).as_matrix()
@@ -1113,8 +1130,20 @@ def world_frames(preset: str | ErrorFamilies, seed: int, n_frames: int = 1,
                              R @ (o.translation - centre) + centre, o.scale)
                  for o in objs]
         fk = f * (zoom_factor if zoom_frame is not None and k >= zoom_frame else 1.0)
-        out.append(apply_errors(render(moved, fk, w, h, table=(centre, up)), state, rng))
+        out.append(apply_errors(render(moved, fk, w, h, principal_point=pp, table=(centre, up)),
+                                state, rng))
     return WorldSequence(out, errors, (w, h))
+
+
+def _principal_point(bound: float, seed: int, w: int, h: int):
+    """The sequence's principal point (px) for a ``principal_point`` bound, None (the image
+    centre) at 0; drawn from a generator of the seed's own, not the sequence's."""
+    if bound <= 0:
+        return None
+    rng = np.random.default_rng([seed, 104])
+    off = rng.uniform(0, bound) * rng.uniform(-1, 1, 2) * np.array([w, h])
+    cx, cy = image_centre(w, h)
+    return (cx + float(off[0]), cy + float(off[1]))
 
 
 def world_frame(preset: str | ErrorFamilies, seed: int, variant: str = "tuning", **kw) -> Frame:

@@ -1,0 +1,65 @@
+"""The principal point where it is assumed at the image centre: how far each object's focal
+length moves with it, and the offset that the objects' disagreement shows.
+
+An error of the principal point shears every object's back-projection by the depth, which each
+object's fit turns into an error of its own focal length, by a gradient that depends on where
+the object is in the image and how it is shaped. So the objects of one frame disagree in a way
+a principal-point offset explains: each object's log f is y_o = log f + g_o . delta + e_o. The
+offset delta (px) is estimated with the objects' variances and a prior of ``pp_std`` per axis,
+the objects' log f corrected by it, and the uncertainty it leaves enters std_rel. One object
+cannot tell an offset from the focal length, so it pays the prior whole; objects spread over
+the image with precise fits fix it.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .object_fit import fit_objects
+
+
+def focal_gradients(support, f0: float, seed: int, pp_std, options) -> np.ndarray:
+    """(O, 2) d log f / d(cx, cy) of every object, per pixel: its fit redone with the principal
+    point one standard deviation either way along each axis (the same pixels), the central
+    difference; zeros along an axis whose standard deviation is 0."""
+    grads = np.zeros((len(support), 2))
+    for axis in (0, 1):
+        step = float(pp_std[axis])
+        if step <= 0:
+            continue
+        logf = []
+        for sign in (1.0, -1.0):
+            shift = np.zeros(2)
+            shift[axis] = sign * step
+            # x is measured from the principal point: moving it by +shift moves x by -shift.
+            moved = [replace(inst, x=inst.x - shift) for inst in support]
+            fits = fit_objects(moved, f0, max_pixels=options.fit_pixels,
+                               depth_tilt=options.depth_tilt, iterations=options.fit_iterations,
+                               rng=np.random.default_rng(seed))
+            logf.append(np.where(fits.ok, np.log(fits.focal), np.nan))
+        g = (logf[0] - logf[1]) / (2 * step)
+        grads[:, axis] = np.where(np.isfinite(g), g, 0.0)
+    return grads
+
+
+def principal_point_offset(y, var, grads, pp_std) -> tuple[np.ndarray, np.ndarray]:
+    """(delta (2,) px, its covariance (2, 2)): the principal point's offset from the assumed
+    one that best explains the objects' log focal lengths ``y`` (variances ``var``, gradients
+    ``grads`` (n, 2)), with a zero-mean prior of ``pp_std`` (px) per axis and the focal length
+    free. An axis with no prior spread stays at 0."""
+    y, var, grads = np.asarray(y, float), np.asarray(var, float), np.asarray(grads, float)
+    std = np.asarray(pp_std, float)
+    free = std > 0
+    delta, cov = np.zeros(2), np.zeros((2, 2))
+    if not free.any() or y.size == 0:
+        return delta, cov
+    A = np.column_stack([np.ones(y.size), grads[:, free]])
+    w = 1.0 / var
+    info = (A * w[:, None]).T @ A
+    info[1:, 1:] += np.diag(1.0 / std[free] ** 2)
+    inv = np.linalg.inv(info)
+    sol = inv @ ((A * w[:, None]).T @ y)
+    delta[free] = sol[1:]
+    cov[np.ix_(free, free)] = inv[1:, 1:]
+    return delta, cov
