@@ -408,6 +408,16 @@ def check_principal_point_y(h):
     assert spin_until(h.ex, lambda: len(h.info) == 2, 10) and h.info.msgs[-1].k[5] == 200.0
 
 
+def check_principal_point_std(h):
+    frames_then(h, 1)
+    assumed = h.node.last_estimate
+    set_ok(h, principal_point_std=0.0)
+    frames_then(h, 1, first=1)
+    assert assumed.std_rel_principal_point > 0 and assumed.principal_point_offset is not None
+    assert h.node.last_estimate.std_rel_principal_point == 0.0
+    assert h.node.last_estimate.principal_point_offset is None
+
+
 def _skewed(h, k, skew_ns):
     d, n, m = frame_messages(cam(0), T0 + k * DT)
     n.header = header_from_ns(T0 + k * DT + skew_ns, FRAME_ID)

@@ -320,7 +320,8 @@ def test_estimate_frame_is_the_core_estimate_of_the_images_and_names_what_it_ref
     h, w = fr.depth.shape
     seed = int(np.random.default_rng(3).integers(2**31))
     want = estimate_focal(fr.depth.astype(np.float32), fr.nocs.astype(np.float32), fr.mask,
-                          ((w - 1) / 2, (h - 1) / 2), options=opts, poses=False, seed=seed)
+                          ((w - 1) / 2, (h - 1) / 2), options=opts, poses=False, seed=seed,
+                          principal_point_std=(0.0075 * w, 0.0075 * h))  # the centre assumed
     assert got.image_size == (w, h) and got.focal == pytest.approx(want.focal, rel=1e-9)
     assert abs(got.focal / 600.0 - 1) < 0.01
 
@@ -775,6 +776,10 @@ def test_principal_point_per_axis_from_parameter_then_camera_info_in_then_centre
     assert (got.cx, got.cy, got.tx_per_f) == (300.0, 250.0, 0.0)
     got = intrinsics(dict(p, principal_point_y=200.0), _cam_in(cx=300.0, cy=250.0), 640, 480)
     assert (got.cx, got.cy) == (300.0, 200.0)
+    # Only the image centre is an assumption, which the reported uncertainty pays for.
+    assert intrinsics(p, None, 640, 480).assumed == (True, True)
+    assert intrinsics(dict(p, principal_point_y=200.0), None, 640, 480).assumed == (True, False)
+    assert intrinsics(p, _cam_in(cx=300.0, cy=250.0), 640, 480).assumed == (False, False)
 
 
 @pytest.mark.parametrize("params, cam, reason", [

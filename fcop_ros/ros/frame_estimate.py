@@ -29,5 +29,7 @@ def estimate_frame(msgs, params: dict, camera_info_in, options, rng) -> FocalEst
         raise FrameRefused("bad_encoding", str(exc)) from None
     h, w = depth.shape
     intr = intrinsics(params, camera_info_in, w, h)
+    pp_std = tuple(params["principal_point_std"] * size if assumed else 0.0
+                   for size, assumed in zip((w, h), intr.assumed))
     return estimate_focal(depth, nocs, mask, (intr.cx, intr.cy), options=options, poses=False,
-                          seed=int(rng.integers(2**31)))
+                          seed=int(rng.integers(2**31)), principal_point_std=pp_std)

@@ -30,11 +30,13 @@ class IntrinsicsRefused(Refused):
 @dataclass(frozen=True)
 class Intrinsics:
     """Principal point (px) of the rectified images and, for a stereo camera's second image,
-    ``tx_per_f``: camera_info_in's P[0, 3] / P[0, 0] (minus the baseline, metres)."""
+    ``tx_per_f``: camera_info_in's P[0, 3] / P[0, 0] (minus the baseline, metres); ``assumed``:
+    per axis, whether the principal point is the image centre for want of anything better."""
 
     cx: float
     cy: float
     tx_per_f: float = 0.0
+    assumed: tuple = (False, False)
 
 
 def _principal_point_in(cam: CameraInfo | None):
@@ -71,10 +73,13 @@ def intrinsics(params: dict, camera_info_in: CameraInfo | None, width: int,
             "camera_info_size_mismatch",
             f"camera_info_in is {cam.width}x{cam.height}, the images are {width}x{height}",
         )
-    fallback = _principal_point_in(cam) or image_centre(width, height)
+    given = _principal_point_in(cam)
+    fallback = given or image_centre(width, height)
+    names = ("principal_point_x", "principal_point_y")
+    assumed = tuple(given is None and params[name] < 0 for name in names)
     cx, cy = (
         params[name] if params[name] >= 0 else default
-        for name, default in zip(("principal_point_x", "principal_point_y"), fallback)
+        for name, default in zip(names, fallback)
     )
     if not inside_image(cx, cy, width, height):
         raise IntrinsicsRefused(
@@ -82,7 +87,7 @@ def intrinsics(params: dict, camera_info_in: CameraInfo | None, width: int,
             f"principal point ({cx}, {cy}) is outside the {width}x{height} image",
         )
     tx_per_f = float(cam.p[3]) / float(cam.p[0]) if cam is not None and cam.p[0] != 0 else 0.0
-    return Intrinsics(float(cx), float(cy), tx_per_f)
+    return Intrinsics(float(cx), float(cy), tx_per_f, assumed)
 
 
 def camera_info_with(focal: float, intr: Intrinsics, width: int, height: int,

@@ -101,6 +101,13 @@ PARAMETERS: dict[str, ParamSpec] = {
         "centre (H-1)/2.",
         range=(-1.0, 1e6),
     ),
+    "principal_point_std": ParamSpec(
+        0.0075,
+        "How far the principal point may be off the image centre where it is assumed there "
+        "(no principal_point_x/y, no camera_info_in), a fraction of the image's width and "
+        "height; it widens the reported uncertainty only.",
+        range=(0.0, 0.5),
+    ),
     "sync_mode": ParamSpec(
         "exact",
         "'exact' (equal stamps) or 'approximate' (within sync_slop).",
