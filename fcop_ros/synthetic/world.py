@@ -109,6 +109,31 @@ it truly is). Every mechanism is zero-mean as the families are except two, which
 mismatch in the pipeline rather than a predictor's error: the late NOCS (a latency, whose error
 follows the camera's motion) and the principal point (a camera model taken for granted; its
 direction is random, its size is not zero-mean).
+A tenth (``variant="heldout10"``, fixed on 24 Nov 2026 before any evaluation on it) errs as a
+camera, a depth network, a category prior and a tracker do in ways the others leave out: with
+mask errors, the images are taken through a lens whose rectification left a radial distortion,
+x (1 + k1 r^2 + k2 r^4) in coordinates normalised by the true focal length about the true
+principal point, k1 uniform in +-0.02 times the mask width over 3 and k2 = -k1 / 4, kept for the
+sequence, where the estimator assumes a pinhole; in the same resampling, the principal point is
+off the image centre by a Gaussian of 0.6% of the image's size per axis times the mask width
+over 3 (sub-pixel, kept for the sequence; the frame's ``principal_point`` says where it truly
+is); each object's relief finer than a third of its radius is sharpened or flattened, depth +
+a (depth - its Gaussian blur over the object), a drawn per object for the sequence in +-3 times
+the relief family's strength (a network that over- or understates detail; none without relief
+errors, so none in ``sensor``, whose depth is a sensor's); with per-pixel depth noise (a
+sensor's or a network's), each object's depth has one to three holes (a specular or dark
+surface: NaN), together up to 10% of its pixels, drawn anew in every frame; each object's NOCS
+bend along its own up axis and taper (x += b (y - 0.5)^2; x and z about 0.5 times
+1 + c (y - 0.5)), b and c drawn per object for the sequence so that either moves the object's
+ends by up to 3 times the NOCS field's strength (a category prior whose shape bends, in place of
+the tuning model's NOCS field, sized as heldout4's stretch); and, with mask errors, each
+instance's mask is eroded or dilated by a width drawn anew in every frame (a flickering
+segmentation, as the tuning model's), and at a probability of 5% per frame two instances
+exchange their ids for that frame only (a tracker's id switch). Its smooth depth fields are the
+tuning model's. Every mechanism is zero-mean as the families are except three: the lens and the
+principal point (a camera model taken for granted: the distortion's sign and the point's
+direction are random, their sizes are not zero-mean) and the holes (which remove depth and
+never change it).
 """
 from __future__ import annotations
 
@@ -317,15 +342,16 @@ def _lens_row_field(rng, h, w, cells):
 
 
 VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5", "heldout6",
-            "heldout7", "heldout8", "heldout9")
+            "heldout7", "heldout8", "heldout9", "heldout10")
 # heldout7's image fields are the tuning grid's, drawn per segment (ErrorState._segments);
 # heldout8's finer ones are the tuning grid's, grown with depth (ErrorState._grown);
 # heldout9 has no image field: its depth fields are sinusoids fixed in the scene
-# (ErrorState._scene_field), its NOCS distortion a pull towards a ramp (_ramp_pull).
+# (ErrorState._scene_field), its NOCS distortion a pull towards a ramp (_ramp_pull);
+# heldout10's depth fields are the tuning grid's, its NOCS distortion a bend (_bend).
 _FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field,
            "heldout3": _poly_field, "heldout4": _ring_field, "heldout5": _tile_field,
            "heldout6": _lens_row_field, "heldout7": _grid_field, "heldout8": _grid_field,
-           "heldout9": _grid_field}
+           "heldout9": _grid_field, "heldout10": _grid_field}
 # heldout8's familiar-size cue: the typical size (bounding-box diagonal, m; the geometric mean
 # of SceneSpec's range) and the spread of log sizes that one unit of the field stands for.
 _TYPICAL_SIZE = 0.17
@@ -547,6 +573,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             depth[t] = zc + (1.0 + ob["relief"]) * (depth[t] - zc)
         if e.shape > 0:
             nocs[m] = 0.5 + (nocs[m] - 0.5) * ob["shape"]
+    if state.variant == "heldout10" and e.relief > 0:
+        depth = _sharpened(depth, frame.mask, state, rng, e.relief)
     if e.edge_px > 0:
         far = np.nanmax(depth) if finite.any() else 1.0
         filled = np.where(finite, depth, far).astype(np.float32)
@@ -634,6 +662,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             nocs = _azimuth_stretch(nocs, mask, frame, state, rng, e.nocs_field)
         elif state.variant == "heldout9":
             nocs = _ramp_pull(nocs, mask, state, rng, e.nocs_field)
+        elif state.variant == "heldout10":
+            nocs = _bend(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout":
             # Scaled to ``nocs_field`` rms on the objects, as the other variants' distortions:
             # unscaled, q^T W q with |q| < 0.5 moved the NOCS 8x less than the tuning field.
@@ -666,6 +696,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         depth = _disparity8(depth)
     if state.variant == "heldout9" and e.depth_pixel > 0:
         depth = _low_res(depth, state._kept("low_res", lambda: int(rng.choice([2, 4]))))
+    if state.variant == "heldout10" and e.depth_pixel > 0:
+        depth = _holes(depth, frame.mask, rng)
     nocs[mask > 0] = np.clip(nocs[mask > 0], 0.0, 1.0)
     if state.variant == "heldout4" and e.nocs_pixel > 0:
         nocs = np.round(nocs * 255.0) / 255.0  # as an rgb8 NOCS image holds them
@@ -686,6 +718,11 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         cx, cy = frame.principal_point
         return replace(frame, depth=depth, nocs=nocs, mask=mask, principal_point=(cx + dx,
                                                                                  cy + dy))
+    if state.variant == "heldout10" and e.mask_px > 0:
+        # A tracker's id switch, then a camera that is no pinhole centred on the image.
+        mask = _id_switch(mask, [o.instance_id for o in frame.objects], rng)
+        return _through_lens(replace(frame, depth=depth, nocs=nocs, mask=mask), frame.mask,
+                             state, rng, e.mask_px)
     return replace(frame, depth=depth, nocs=nocs, mask=mask)
 
 
@@ -962,6 +999,151 @@ def _shifted(img, dx, dy, fill):
     return out
 
 
+def _sharpened(depth, truth, state, rng, bound):
+    """Each object's (of the true mask ``truth``) depth + a (depth - its blur over the
+    object's finite pixels, so that the background does not leak in), a uniform in +-3
+    ``bound`` per object, kept for the sequence: a depth network that sharpens (a > 0) or
+    flattens (a < 0) relief."""
+    out = depth.copy()
+    for iid in np.unique(truth[truth > 0]):
+        m = (truth == iid) & np.isfinite(depth)
+        a = state._kept(("sharpen", int(iid)), lambda: float(rng.uniform(-3 * bound, 3 * bound)))
+        if m.sum() < 4:
+            continue
+        out[m] = depth[m] + a * (depth[m] - _masked_blur(depth, m))
+    return out
+
+
+def _masked_blur(depth, m):
+    """``depth``'s Gaussian blur over the pixels ``m`` alone (sigma a third of their radius;
+    the blur of ``m`` divides it), at those pixels: computed over their box widened by the
+    kernel's reach, which is what a blur of the whole image gives there."""
+    sigma = max(np.sqrt(m.sum() / np.pi) / 3.0, 0.5)
+    ys, xs = np.nonzero(m)
+    pad = int(np.ceil(4 * sigma)) + 2
+    box = (slice(max(ys.min() - pad, 0), ys.max() + pad + 1),
+           slice(max(xs.min() - pad, 0), xs.max() + pad + 1))
+    num = cv2.GaussianBlur(np.where(m, depth, 0.0)[box], (0, 0), sigma)
+    den = cv2.GaussianBlur(m[box].astype(np.float64), (0, 0), sigma)
+    return num[m[box]] / den[m[box]]
+
+
+def _holes(depth, truth, rng):
+    """``depth`` with one to three elliptic holes (NaN) on each object of the true mask
+    ``truth``, together up to a share drawn in 0..10% of its pixels, drawn anew in every call:
+    a specular or dark surface that a sensor or network returns no depth for."""
+    out = depth.copy()
+    for iid in np.unique(truth[truth > 0]):
+        m = truth == iid
+        n, share = int(rng.integers(1, 4)), float(rng.uniform(0.0, 0.1))
+        ys, xs = np.nonzero(m)
+        holes = np.zeros(m.shape, np.uint8)
+        for _ in range(n):
+            k, aspect, angle = rng.integers(len(ys)), rng.uniform(0.5, 2.0), rng.uniform(0, 180)
+            r = np.sqrt(share * len(ys) / n / np.pi) - 0.5  # a drawn ellipse's rim, added
+            axes = (int(round(r * np.sqrt(aspect))), int(round(r / np.sqrt(aspect))))
+            if min(axes) > 0:
+                cv2.ellipse(holes, (int(xs[k]), int(ys[k])), axes, float(angle), 0, 360, 1, -1)
+        out[(holes > 0) & m] = np.nan
+    return out
+
+
+def _bend(nocs, mask, state, rng, rms):
+    """Each object's NOCS bent along its up axis (x += b (y - 0.5)^2) and tapered (x and z
+    about 0.5 times 1 + c (y - 0.5)), b in +-12 ``rms`` and c in +-6 ``rms`` (uniform, per
+    object for the sequence), so that either moves the ends (y - 0.5 = +-0.5) by up to 3 ``rms``
+    (+-9% at the base bound, as heldout4's stretch): a category prior whose shape bends and
+    narrows where the instance's does not."""
+    out = nocs.copy()
+    for iid in np.unique(mask[mask > 0]):
+        m = mask == iid
+        b, c = state._kept(("bend", int(iid)),
+                           lambda: tuple(rng.uniform(-1, 1, 2) * [12 * rms, 6 * rms]))
+        q = nocs[m] - 0.5
+        out[m, 0] = 0.5 + q[:, 0] * (1.0 + c * q[:, 1]) + b * q[:, 1] ** 2
+        out[m, 2] = 0.5 + q[:, 2] * (1.0 + c * q[:, 1])
+    return out
+
+
+def _id_switch(mask, ids, rng, p=0.05):
+    """``mask`` with, at probability ``p``, two of the instances ``ids`` that it shows
+    exchanging their ids (a tracker's id switch, for this frame only)."""
+    shown = [i for i in ids if np.any(mask == i)]
+    if rng.random() >= p or len(shown) < 2:
+        return mask
+    a, b = rng.choice(shown, 2, replace=False)
+    out = mask.copy()
+    out[mask == a], out[mask == b] = b, a
+    return out
+
+
+def _undistort(xd, yd, k1, k2):
+    """The normalised point (x, y) that the radial distortion x (1 + k1 r^2 + k2 r^4) takes
+    to (xd, yd), by fixed-point iteration (a contraction for the small k1, k2 drawn here)."""
+    x, y = xd, yd
+    for _ in range(10):
+        r2 = x * x + y * y
+        g = 1.0 + k1 * r2 + k2 * r2 * r2
+        x, y = xd / g, yd / g
+    return x, y
+
+
+def _lens_maps(shape, focal, centre, true_centre, k1, k2):
+    """For each pixel of an image taken through a lens of radial distortion (k1, k2) about
+    ``true_centre``, where a pinhole image rendered about ``centre`` holds what it sees
+    (float32 maps for cv2.remap)."""
+    vv, uu = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
+    x, y = _undistort((uu - true_centre[0]) / focal, (vv - true_centre[1]) / focal, k1, k2)
+    return ((centre[0] + focal * x).astype(np.float32),
+            (centre[1] + focal * y).astype(np.float32))
+
+
+def _one_segment(label, mx, my):
+    """Whether the four pixels about each point (mx, my) are in the image and share one
+    ``label`` that is not negative."""
+    h, w = label.shape
+    x0, y0 = np.floor(mx).astype(np.int64), np.floor(my).astype(np.int64)
+    inside = (x0 >= 0) & (x0 < w - 1) & (y0 >= 0) & (y0 < h - 1)
+    x0, y0 = np.clip(x0, 0, w - 2), np.clip(y0, 0, h - 2)
+    first = label[y0, x0]
+    same = [label[y0 + dy, x0 + dx] == first for dy, dx in ((0, 1), (1, 0), (1, 1))]
+    return inside & (first >= 0) & same[0] & same[1] & same[2]
+
+
+def _remapped(depth, nocs, mask, segments, mx, my):
+    """depth, NOCS and mask resampled at (mx, my): bilinearly where the four pixels about a
+    point are of one of ``segments`` and of finite depth, else from the nearest one (the mask
+    always); outside the image NaN depth, NOCS 0 and mask 0."""
+    def at(img, how, fill=0.0):
+        return cv2.remap(img, mx, my, how, borderMode=cv2.BORDER_CONSTANT, borderValue=fill)
+
+    ok = np.isfinite(depth)
+    smooth = _one_segment(np.where(ok, segments, -1.0), mx, my)
+    depth = np.where(smooth, at(np.where(ok, depth, 0.0), cv2.INTER_LINEAR),
+                     at(depth, cv2.INTER_NEAREST, np.nan))
+    nocs = np.where(smooth[..., None], at(nocs, cv2.INTER_LINEAR), at(nocs, cv2.INTER_NEAREST))
+    return depth, nocs, at(mask, cv2.INTER_NEAREST, 0)
+
+
+def _through_lens(seen, truth, state, rng, px):
+    """The frame ``seen`` (its depth, NOCS and mask rendered through a pinhole about its
+    principal point) as a camera takes it whose residual radial distortion, k1 uniform in
+    +-0.02 ``px`` / 3 and k2 = -k1 / 4, and whose principal point, off by a Gaussian of 0.6%
+    of the image's size per axis times ``px`` / 3, are kept for the sequence; the frame's
+    ``principal_point`` is the true one. ``truth`` (the true mask) with ``seen``'s marks the
+    segments not to interpolate across."""
+    h, w = seen.mask.shape
+    k1, dx, dy = state._kept("lens", lambda: (
+        float(rng.uniform(-1, 1) * 0.02 * px / 3),
+        *(float(v) for v in rng.normal(0, 0.006 * px / 3, 2) * [w, h])))
+    cx, cy = seen.principal_point
+    mx, my = _lens_maps((h, w), seen.focal, (cx, cy), (cx + dx, cy + dy), k1, -k1 / 4)
+    segments = truth.astype(np.float64) * (float(seen.mask.max()) + 1.0) + seen.mask
+    depth, nocs, mask = _remapped(seen.depth, seen.nocs, seen.mask, segments, mx, my)
+    nocs[mask == 0] = 0.0
+    return replace(seen, depth=depth, nocs=nocs, mask=mask, principal_point=(cx + dx, cy + dy))
+
+
 def _boxed(m, px, rng):
     """Instance mask m as a box-based detector's mask head gives it: grown by 0..``px`` pixels
     (the head's leak into the background) and cut by its detection box, each side of which is
@@ -1041,8 +1223,8 @@ def _mask_errors(mask, nocs, px, rng, variant, state=None):
     """Erode or dilate (``heldout2``: shift; ``heldout3``: fray; ``heldout4``: outline as a
     polygon with holes; ``heldout5``: fill to the convex hull; ``heldout6``: through a 28x28
     mask head; ``heldout7``: by a width kept for the sequence in ``state``, then bleed into
-    touching instances; ``heldout8``: grow and cut by a detection box; ``heldout9``: as the
-    tuning variant) each instance by up to
+    touching instances; ``heldout8``: grow and cut by a detection box; ``heldout9`` and
+    ``heldout10``: as the tuning variant) each instance by up to
     ``px``
     pixels; grown pixels keep the background depth and take the nearest object's NOCS, as a
     segmentation network's would."""
