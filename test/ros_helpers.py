@@ -76,6 +76,9 @@ class Harness:
         executor.add_node(self.node)
         executor.add_node(self.tester)
         assert spin_until(executor, lambda: all(p.get_subscription_count() for p in self.pubs), 10)
+        # Frames sent while the kernels load would race the warm-up: the worker skips all but
+        # the newest (a first run on a machine compiles them, up to a minute).
+        assert spin_until(executor, lambda: not self.node.warming_up, 180)
 
     def trigger(self, service: str):
         """Call the node's std_srvs/Trigger service ``~/<service>`` and return its response."""

@@ -359,6 +359,8 @@ def test_wrong_encoding_and_size_mismatch(harness):
     wrong = Image(header=d.header, height=d.height, width=d.width, encoding="rgb8",
                   step=d.width * 3, data=bytes(d.width * d.height * 3))
     h.send((wrong, n, m))
+    # one frame at a time: the worker takes only the newest of frames that wait for it
+    assert h.settle(1)
     small = frame_messages(clean_frame(0, 320, 240), T0 + DT)
     h.send((small[0], n, m), which=(0,))
     h.send((d, n, m), which=(1, 2))
