@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import rclpy
+import rclpy.logging
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import InvalidServiceNameException, ParameterException
@@ -407,9 +408,13 @@ class FcopNode(Node):
         """Compile the estimator's kernels (or load them from numba's cache) before the first
         frame; where they cannot be compiled, the numpy paths serve. /diagnostics says so
         meanwhile (a first run on a machine compiles for up to a minute). After Ctrl-C the
-        context is gone and the outcome is not logged (rosout would refuse the line)."""
+        context is gone and the outcome is not logged. The lines go to the console only: from
+        this thread a rosout publish can race a Ctrl-C's shutdown between the check and the
+        publish, and rcl then prints "Failed to publish log message to rosout" (seen once in
+        CI); /diagnostics carries the kernels' state."""
+        log = rclpy.logging.get_logger(f"{self.get_logger().name}.kernels")  # not on rosout
         if compiled.ENABLED:
-            self.get_logger().info(
+            log.info(
                 "fcop_node: preparing the estimator's kernels (the first run on a machine "
                 "compiles them, up to a minute; later runs load them from the cache)"
             )
@@ -419,13 +424,13 @@ class FcopNode(Node):
         except Exception as exc:  # noqa: BLE001 - any compiler failure leaves numpy working
             compiled.ENABLED = False
             if self.context.ok():
-                self.get_logger().warning(
+                log.warning(
                     f"fcop_node: the compiled kernels failed to build ({exc!r}); estimating "
                     "with numpy, several times slower"
                 )
         else:
             if compiled.ENABLED and self.context.ok():
-                self.get_logger().info(
+                log.info(
                     f"fcop_node: estimator kernels ready ({compiled.describe()}, {seconds:.1f} s)"
                 )
         finally:
