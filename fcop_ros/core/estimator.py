@@ -769,7 +769,7 @@ def estimate_focal(
     if np.any(pp_std > 0):
         # The offset of an assumed principal point that the objects' disagreement shows: their
         # focal lengths corrected by it, its remaining uncertainty into std_rel (.principal_point).
-        grads = focal_gradients(support, f0, seed, pp_std, opt)
+        grads = focal_gradients(support, f0, seed, pp_std, opt, np.log(fits.focal))
         delta, pp_cov = principal_point_offset(logf[good], var[good] + tau0**2, grads[good],
                                                pp_std)
         logf = logf - grads @ delta

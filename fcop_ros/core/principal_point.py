@@ -19,26 +19,28 @@ import numpy as np
 from .object_fit import fit_objects
 
 
-def focal_gradients(support, f0: float, seed: int, pp_std, options) -> np.ndarray:
+def focal_gradients(support, f0: float, seed: int, pp_std, options, logf) -> np.ndarray:
     """(O, 2) d log f / d(cx, cy) of every object, per pixel: its fit redone with the principal
-    point one standard deviation either way along each axis (the same pixels), the central
-    difference; zeros along an axis whose standard deviation is 0."""
+    point one standard deviation along each axis (the same pixels as the fit ``logf`` came
+    from), the forward difference; zeros along an axis whose standard deviation is 0.
+
+    Forward, not central: half the refits (the frame's cost, +2.4 against +1.2 ms on 5-object
+    640x480 frames). Over 187 objects of tuning frames the two differ by a median 4% (sensor)
+    and 2% (predicted) of the gradient, less than another draw of the fit's pixels moves it
+    (12% and 15%)."""
     grads = np.zeros((len(support), 2))
     for axis in (0, 1):
         step = float(pp_std[axis])
         if step <= 0:
             continue
-        logf = []
-        for sign in (1.0, -1.0):
-            shift = np.zeros(2)
-            shift[axis] = sign * step
-            # x is measured from the principal point: moving it by +shift moves x by -shift.
-            moved = [replace(inst, x=inst.x - shift) for inst in support]
-            fits = fit_objects(moved, f0, max_pixels=options.fit_pixels,
-                               depth_tilt=options.depth_tilt, iterations=options.fit_iterations,
-                               rng=np.random.default_rng(seed))
-            logf.append(np.where(fits.ok, np.log(fits.focal), np.nan))
-        g = (logf[0] - logf[1]) / (2 * step)
+        shift = np.zeros(2)
+        shift[axis] = step
+        # x is measured from the principal point: moving it by +shift moves x by -shift.
+        moved = [replace(inst, x=inst.x - shift) for inst in support]
+        fits = fit_objects(moved, f0, max_pixels=options.fit_pixels,
+                           depth_tilt=options.depth_tilt, iterations=options.fit_iterations,
+                           rng=np.random.default_rng(seed))
+        g = (np.where(fits.ok, np.log(fits.focal), np.nan) - logf) / step
         grads[:, axis] = np.where(np.isfinite(g), g, 0.0)
     return grads
 
