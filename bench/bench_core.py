@@ -175,6 +175,11 @@ def frame_estimate(repeats):
     # The node hands the estimator float32 images (msg_adapters): the same frames as it sees them.
     f32 = [(fr.depth.astype(np.float32), fr.nocs.astype(np.float32), fr.mask) for fr in frames]
     as_node = frame_times(lambda im, k: estimate_focal(*im, seed=k, poses=False), f32, repeats)
+    # What the assumed principal point's term costs: the same frames with the centre given.
+    given_pp = frame_times(lambda fr, k: estimate_focal(
+        fr.depth, fr.nocs, fr.mask, seed=k, poses=False,
+        principal_point=image_centre(fr.depth.shape[1], fr.depth.shape[0])),
+        frames, repeats)
     numpy_path = None
     if compiled.ENABLED:  # the numpy fallback on the same frames, right after
         compiled.ENABLED = False
@@ -194,6 +199,8 @@ def frame_estimate(repeats):
           f"(target 5 ms on one quiet core: {verdict(med <= 5)})")
     print(f"  the same frames as float32 images (as the node passes them): median "
           f"{np.median(as_node):.1f} ms")
+    print(f"  with the principal point given (no principal-point term, as with camera_info_in): "
+          f"median {np.median(given_pp):.1f} ms")
     if numpy_path is not None:
         print(f"  numpy path (FCOP_NUMBA=0) on the same frames: median "
               f"{np.median(numpy_path):.1f} ms; compiled {med / np.median(numpy_path):.2f}x that")
