@@ -594,7 +594,9 @@ def estimate_focal(
         principal_point: (cx, cy) pixels; default ((W-1)/2, (H-1)/2).
         principal_point_std: (sx, sy) pixels, how far the principal point may be off; default
             none for a given ``principal_point``, ``options.principal_point_std`` of the
-            image's width and height for the assumed centre. It widens std_rel only.
+            image's width and height for the assumed centre. The prior of the offset the
+            objects' disagreement shows: f is corrected by that offset, and std_rel widened
+            by what remains uncertain of it (0: neither).
         options: an :class:`EstimatorOptions` (default: fcop_ros's settings;
             ``PAPER_FCOP_IS``: the paper's method taken literally).
         seed: of the random triplets and pixel subsets (None: from the OS).
@@ -769,7 +771,7 @@ def estimate_focal(
     if np.any(pp_std > 0):
         # The offset of an assumed principal point that the objects' disagreement shows: their
         # focal lengths corrected by it, its remaining uncertainty into std_rel (.principal_point).
-        grads = focal_gradients(support, f0, seed, pp_std, opt, np.log(fits.focal))
+        grads = focal_gradients(support, f0, seed, pp_std, opt, logf)
         delta, pp_cov = principal_point_offset(logf[good], var[good] + tau0**2, grads[good],
                                                pp_std)
         logf = logf - grads @ delta

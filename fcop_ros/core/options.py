@@ -85,8 +85,9 @@ class EstimatorOptions:
     log f by relief) worth ``object_tau_weight`` objects: a frame of one object, which no other
     can contradict, pays it whole. No pose for an object whose own std_rel exceeds
     ``pose_max_std``. ``principal_point_std``: how far the principal point, where it is assumed
-    at the image centre, may be off (a fraction of the image's width and height, per axis); it
-    widens std_rel through each object's gradient of f by the principal point.
+    at the image centre, may be off (a fraction of the image's width and height, per axis): the
+    prior of the offset the objects' disagreement shows, by which f is corrected; what remains
+    uncertain of it widens std_rel through each object's gradient of f by the principal point.
 
     ``method``: "stabbing" (triplet votes and interval stabbing, as the paper's fCOP-IS, then
     the refinement above unless ``refine=False``; ``PAPER_FCOP_IS`` is the paper's method taken

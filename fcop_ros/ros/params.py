@@ -105,7 +105,8 @@ PARAMETERS: dict[str, ParamSpec] = {
         0.0075,
         "How far the principal point may be off the image centre where it is assumed there "
         "(no principal_point_x/y, no camera_info_in), a fraction of the image's width and "
-        "height; it widens the reported uncertainty only.",
+        "height: the prior of the offset the objects show, which corrects the focal length; "
+        "what remains uncertain widens the reported uncertainty (0: neither).",
         range=(0.0, 0.5),
     ),
     "sync_mode": ParamSpec(
