@@ -907,3 +907,42 @@ def test_health_news_says_each_problem_once_and_its_end():
     assert news(DiagnosticStatus.OK, "focal 600.0 px") == (
         DiagnosticStatus.OK, "healthy again: focal 600.0 px")
     assert news(DiagnosticStatus.OK, "focal 600.0 px") is None
+
+
+# ----- shutting a context down
+
+
+def test_shut_down_takes_a_context_that_a_signal_shut_down_under_it_as_done(monkeypatch):
+    """Jazzy's signal handler shuts contexts down from its own thread without rclpy's lock.
+    When that fell between ``try_shutdown``'s check and its shutdown, rcl raised
+    "rcl_shutdown already called" and a clean Ctrl-C exited 1 with a traceback (CI on 2a67016,
+    once; not seen in 15 runs of the Ctrl-C tests here). Here the two shutdowns come in that
+    order, the second raising what each distribution's rcl raises; any other failure, with
+    the context still up, still raises."""
+    import rclpy
+    from rclpy.context import Context
+
+    from fcop_ros.ros.spin import shut_down
+
+    ctx = Context()
+    rclpy.init(context=ctx)
+
+    def raced():
+        ctx.handle.shutdown()  # the signal thread's, after try_shutdown found the context ok
+        ctx.handle.shutdown()  # try_shutdown's own: rcl_shutdown already called
+
+    monkeypatch.setattr(ctx, "try_shutdown", raced)
+    shut_down(ctx)
+    assert not ctx.ok()
+
+    other = Context()
+    rclpy.init(context=other)
+
+    def fails():
+        raise RuntimeError("failed to shutdown: something else")
+
+    monkeypatch.setattr(other, "try_shutdown", fails)
+    with pytest.raises(RuntimeError, match="something else"):
+        shut_down(other)
+    monkeypatch.undo()
+    other.try_shutdown()

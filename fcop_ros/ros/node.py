@@ -63,6 +63,7 @@ from .params import (
     window_options,
 )
 from .qos import input_qos, latched_qos, output_qos, refused_override
+from .spin import shut_down
 from .sync import StampSynchronizer
 from .throttle import LogThrottle
 from .topics import CAMERA_INFO_IN, INPUTS, OUTPUTS
@@ -743,9 +744,7 @@ def main(args=None) -> int:
     finally:
         if node is not None:
             node.destroy_node()
-        # Under the context's lock: a Ctrl-C's handler may shut it down between a check and a
-        # shutdown (rcl then raised "rcl_shutdown already called" after a clean stop).
-        rclpy.try_shutdown()
+        shut_down()  # a Ctrl-C's handler may be shutting it down at the same moment
     return 0
 
 

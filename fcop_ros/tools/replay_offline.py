@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from ..ros.dds import use_large_image_profile
+from ..ros.spin import shut_down
 from ..ros.spin import spin_until as spin
 from .bagio import BagError, BagSource, BagWriter, error_text, not_a_bag_of, remove_bag
 from .estimates_csv import EstimatesCsv, not_an_estimates_csv
@@ -365,7 +366,7 @@ def replay(
             step(state["feeder"].destroy_node)
         if state["executor"] is not None:
             step(lambda: state["executor"].shutdown(timeout_sec=1.0))
-        step(ctx.try_shutdown)
+        step(lambda: shut_down(ctx))
         step(source.close)
         if state["writer"] is not None:
 

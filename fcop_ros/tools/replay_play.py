@@ -118,6 +118,8 @@ def play(
 
     from msg_adapters import time_from_ns
 
+    from ..ros.spin import shut_down
+
     _check_numbers(rate, clock_hz, wait_subscribers)
     say = say or (lambda line: None)
     inputs = dict(zip(INPUTS, image_topics, strict=True))
@@ -206,5 +208,5 @@ def play(
         node.destroy_node()
         source.close()
         if own:
-            rclpy.try_shutdown()  # under the context's lock, as a Ctrl-C's handler may shut it
+            shut_down()  # a Ctrl-C's handler may be shutting it down at the same moment
     return result
