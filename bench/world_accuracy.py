@@ -4,7 +4,8 @@
         [--heldout | --heldout2 | --heldout3 | --heldout4 | --heldout5 | --heldout6
          | --heldout7 | --heldout8 | --heldout9 | --heldout10]
         [--parts single bias window zoom preset_bias pipes weights tau] [--objects N]
-        [--set NAME=VALUE]
+        [--set NAME=VALUE] [--orbit DEG] [--given-principal-point] [--first-sequence SEED]
+        [--world NAME=VALUE]
 
 Tuned rows use the seeds the estimator's few constants were chosen on (frames from seed 1000,
 sequences from seed 5000, the tuning error model). Held-out rows (--heldout) use seeds from
@@ -91,6 +92,9 @@ from peers import p4pf
 #: fcop_ros's settings (``--set``) and the scenes' object count (``--objects``; None: 1 to 6).
 OPTIONS = EstimatorOptions()
 OBJECTS = None
+ORBIT_DEG = 2.0  # the camera's orbit per frame in the sequences (world_frames' default)
+GIVEN_PP = False  # the sequences' estimates get the true principal point, not the centre
+WORLD = {}  # error-family bounds of the sequences' presets other than the presets' own
 
 
 #: Each error model's first frame seed and first sequence seed (``--heldout*`` picks one).
@@ -371,13 +375,16 @@ def tau(presets, frames, first_seed, variant):
 
 
 def run_sequence(preset, seed, n, variant, zoom=1.0):
+    if WORLD:
+        preset = replace(WORLD_PRESETS[preset], **WORLD)
     seq = world_frames(preset, seed, n, variant, zoom_frame=n // 2 if zoom != 1.0 else None,
-                       zoom_factor=zoom, objects=OBJECTS)
+                       zoom_factor=zoom, objects=OBJECTS, orbit_deg=ORBIT_DEG)
     win = FocalWindow(WindowOptions(max_frames=30))
     rows = []
     for k, fr in enumerate(seq.frames):
-        est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k, poses=False,
-                                 options=OPTIONS)
+        pp = fr.principal_point if GIVEN_PP else None
+        est = estimate_focal(fr.depth, fr.nocs, fr.mask, pp, seed=k, poses=False,
+                             options=OPTIONS)
         w = win.add(est, k / 30)
         rows.append((fr.focal, est.focal, est.std_rel, w.focal, w.std_rel, w.changed))
     return rows
@@ -475,6 +482,7 @@ def zoom(presets, zoom_sequences, first_seed, variant):
 
 
 def main() -> None:
+    global OPTIONS, OBJECTS, ORBIT_DEG, GIVEN_PP
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=HelpFormatter)
     ap.add_argument(
@@ -506,17 +514,36 @@ def main() -> None:
     ap.add_argument("--set", nargs="+", default=[], metavar="NAME=VALUE",
                     help="fcop_ros's EstimatorOptions other than the defaults, e.g. "
                     "object_tau=0.03 (a trial; the figures in the docs use the defaults)")
+    ap.add_argument("--orbit", type=float, default=ORBIT_DEG, metavar="DEG",
+                    help="the camera's orbit about the scene per frame in the window's and "
+                    "zooms' sequences (a trial: how much the window averages as the view "
+                    "changes; the figures in the docs use 2)")
+    ap.add_argument("--given-principal-point", action="store_true",
+                    help="the sequences' estimates get the true principal point instead of "
+                    "assuming the image centre (a trial: what the window loses to it)")
+    ap.add_argument("--first-sequence", type=int, default=None, metavar="SEED",
+                    help="the sequences' first seed instead of the error model's (a trial: "
+                    "other draws of the same world)")
+    ap.add_argument("--world", nargs="+", default=[], metavar="NAME=VALUE",
+                    help="the sequences' error-family bounds other than the presets' own, e.g. "
+                    "principal_point=0 (a trial)")
     args = ap.parse_args()
-    global OPTIONS, OBJECTS
     OBJECTS = args.objects
+    ORBIT_DEG, GIVEN_PP = args.orbit, args.given_principal_point
+    for item in args.world:
+        name, _, value = item.partition("=")
+        WORLD[name] = float(value)
     given = {}
     for item in args.set:
         name, _, value = item.partition("=")
         default = getattr(EstimatorOptions(), name)
         given[name] = type(default)(value)
     OPTIONS = EstimatorOptions(**given)
-    if given or OBJECTS is not None:
-        print(f"settings: {given or 'defaults'}; objects per scene: {OBJECTS or '1 to 6'}\n")
+    if given or OBJECTS is not None or ORBIT_DEG != 2.0 or GIVEN_PP or WORLD:
+        print(f"settings: {given or 'defaults'}; objects per scene: {OBJECTS or '1 to 6'}; "
+              f"orbit {ORBIT_DEG:g} deg per frame; principal point "
+              f"{'given' if GIVEN_PP else 'assumed at the centre'} in the sequences; "
+              f"world {WORLD or 'as the presets'}\n")
     try:
         import pycolmap  # noqa: F401
         have_colmap = True
@@ -525,6 +552,8 @@ def main() -> None:
         print("pycolmap is not installed (pip install '.[bench]'): no P4Pf rows\n")
     variant = args.variant or "tuning"
     frame_seed, seq_seed = SEEDS[variant]
+    if args.first_sequence is not None:
+        seq_seed = args.first_sequence
     print(
         f"{'tuning' if variant == 'tuning' else 'HELD-OUT'} set: error model '{variant}', "
         f"frames from seed {frame_seed}, sequences from seed {seq_seed}\n"

@@ -52,3 +52,20 @@ def test_bench_node_per_frame_records_do_not_grow():
     assert len(record.array()) == 3000 and (record.array() >= 0).all()
     timed(0)  # past the size: counted, not kept
     assert record.n == 3001 and len(record.array()) == 3000
+
+
+def test_world_accuracy_window_trials_run_and_say_their_settings():
+    """The window part's trial options (docs/BENCHMARKS.md, "What the window can average") on
+    two sequences: the run says what it changed, and the sequences start at the seed given.
+    The first version named a global before declaring it: a SyntaxError on every run."""
+    out = subprocess.run(
+        [sys.executable, os.path.join(ROOT, "bench", "world_accuracy.py"), "--parts", "window",
+         "--sequences", "2", "--zoom-sequences", "0", "--orbit", "10", "--given-principal-point",
+         "--first-sequence", "7000", "--world", "principal_point=0"],
+        capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert ("orbit 10 deg per frame; principal point given in the sequences; world "
+            "{'principal_point': 0.0}") in out.stdout, out.stdout
+    assert "sequences from seed 7000" in out.stdout, out.stdout
+    rows = re.findall(r"^\| (sensor|predicted) \| 2 \|", out.stdout, re.M)
+    assert rows == ["sensor", "predicted"], out.stdout
