@@ -912,13 +912,25 @@ def test_health_news_says_each_problem_once_and_its_end():
 # ----- shutting a context down
 
 
+def _raced_once(ctx):
+    """A ``try_shutdown`` for ``ctx`` whose first call meets a signal's shutdown between its
+    check and its own (the second then raises what that distribution's rcl raises)."""
+    calls = []
+
+    def raced():
+        if not calls:
+            calls.append(1)
+            ctx.handle.shutdown()  # the signal thread's, after try_shutdown found the context ok
+            ctx.handle.shutdown()  # try_shutdown's own
+    return raced
+
+
 def test_shut_down_takes_a_context_that_a_signal_shut_down_under_it_as_done(monkeypatch):
     """Jazzy's signal handler shuts contexts down from its own thread without rclpy's lock.
     When that fell between ``try_shutdown``'s check and its shutdown, rcl raised
     "rcl_shutdown already called" and a clean Ctrl-C exited 1 with a traceback (CI on 2a67016,
     once; not seen in 15 runs of the Ctrl-C tests here). Here the two shutdowns come in that
-    order, the second raising what each distribution's rcl raises; any other failure, with
-    the context still up, still raises."""
+    order. Any other failure, with the context still up, still raises."""
     import rclpy
     from rclpy.context import Context
 
@@ -926,12 +938,7 @@ def test_shut_down_takes_a_context_that_a_signal_shut_down_under_it_as_done(monk
 
     ctx = Context()
     rclpy.init(context=ctx)
-
-    def raced():
-        ctx.handle.shutdown()  # the signal thread's, after try_shutdown found the context ok
-        ctx.handle.shutdown()  # try_shutdown's own: rcl_shutdown already called
-
-    monkeypatch.setattr(ctx, "try_shutdown", raced)
+    monkeypatch.setattr(ctx, "try_shutdown", _raced_once(ctx))
     shut_down(ctx)
     assert not ctx.ok()
 
@@ -946,3 +953,24 @@ def test_shut_down_takes_a_context_that_a_signal_shut_down_under_it_as_done(monk
         shut_down(other)
     monkeypatch.undo()
     other.try_shutdown()
+
+
+def test_shut_down_of_the_default_context_lets_rclpy_init_again(monkeypatch):
+    """fcop_replay --play runs on rclpy's default context and may run twice in one process (the
+    tests do). The first shut_down shut it down without letting rclpy replace it, and the
+    second run's rclpy.init raised "Context.init() must only be called once" (CI on 1b54fca).
+    Also after the race above."""
+    import rclpy
+    from rclpy.utilities import get_default_context
+
+    from fcop_ros.ros.spin import shut_down
+
+    for race in (False, True):
+        rclpy.init()
+        ctx = get_default_context()
+        if race:
+            monkeypatch.setattr(ctx, "try_shutdown", _raced_once(ctx))
+        shut_down()
+        assert not ctx.ok() and get_default_context() is not ctx, race
+    rclpy.init()  # the one a third run makes
+    shut_down()

@@ -26,19 +26,22 @@ def ros_context(args=None):
 
 
 def shut_down(context=None) -> None:
-    """Shut ``context`` (rclpy's default if None) down unless it already is, also when a Ctrl-C
-    does it at the same moment. On Jazzy rclpy's signal handler shuts contexts down from its
-    own thread without the context's lock: between ``try_shutdown``'s check and its shutdown,
-    rcl raised "rcl_shutdown already called" after a clean stop (one CI run in many). Kilted's
-    handle says "Context already shutdown" (a RuntimeError, as rcl's RCLError is)."""
+    """``rclpy.try_shutdown`` of ``context`` (None: the default one, which rclpy then replaces,
+    so that ``rclpy.init`` works again), also when a Ctrl-C shuts it down at the same moment.
+    On Jazzy rclpy's signal handler shuts contexts down from its own thread without the
+    context's lock: between ``try_shutdown``'s check and its shutdown, rcl raised
+    "rcl_shutdown already called" after a clean stop (one CI run in many). Kilted's handle says
+    "Context already shutdown" (a RuntimeError, as rcl's RCLError is)."""
+    import rclpy
     from rclpy.utilities import get_default_context
 
-    context = get_default_context() if context is None else context
     try:
-        context.try_shutdown()
+        rclpy.try_shutdown(context=context)
     except RuntimeError:
-        if context.ok():
+        if (get_default_context() if context is None else context).ok():
             raise
+        if context is None:
+            rclpy.try_shutdown()  # it is down now: rclpy replaces the default context
 
 
 def spin_until(executor, condition, timeout: float = 20.0, step: float = 0.02) -> bool:
