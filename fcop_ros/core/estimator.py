@@ -783,12 +783,13 @@ def estimate_focal(
         return est
     kept = [inst for inst, g in zip(support, good) if g]
     var_pp_obj = np.einsum("oi,ij,oj->o", grads, pp_cov, grads)
-    idx_used = np.flatnonzero(good)[comb.used]
+    good_idx = np.flatnonzero(good)
+    idx_used = good_idx[comb.used]
     w_noise = 1.0 / np.minimum(fits.var_log_focal[idx_used], var[idx_used])
     g_frame = (w_noise[:, None] * grads[idx_used]).sum(0) / w_noise.sum()
     var_pp = float(g_frame @ pp_cov @ g_frame)
     for k, (inst, used) in enumerate(zip(kept, comb.used)):
-        j = np.flatnonzero(good)[k]
+        j = good_idx[k]
         if used:
             est.object_focals[inst.instance_id] = (
                 float(np.exp(logf[j])),

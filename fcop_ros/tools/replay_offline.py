@@ -8,8 +8,7 @@ import time
 from pathlib import Path
 
 from ..ros.dds import use_large_image_profile
-from ..ros.spin import shut_down
-from ..ros.spin import spin_until as spin
+from ..ros.spin import shut_down, spin_until as spin
 from .bagio import BagError, BagSource, BagWriter, error_text, not_a_bag_of, remove_bag
 from .estimates_csv import EstimatesCsv, not_an_estimates_csv
 from .replay_base import (
