@@ -19,7 +19,8 @@ from sensor_msgs.srv import SetCameraInfo
 from msg_adapters import to_fcop_convention
 from fcop_ros.synthetic.scenes import camera_frame as cam, clean_frame, noisy_frame
 from ros_helpers import (
-    Recorder, call_service, frame_messages, ros_context, rotation_errors, spin_until)
+    Recorder, as_at_a_terminal, call_service, frame_messages, ros_context, rotation_errors,
+    spin_until)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config", "fcop.yaml")
@@ -67,7 +68,7 @@ def test_shipped_params_file_applies_to_the_installed_node_under_a_namespace(tmp
     err = open(tmp_path / "node.err", "w")
     proc = subprocess.Popen([exe, "--ros-args", "-r", "__ns:=/cam", "-r", "__node:=fcop_ns",
                              "--params-file", params],
-                            stdout=subprocess.DEVNULL, stderr=err)
+                            stdout=subprocess.DEVNULL, stderr=err, preexec_fn=as_at_a_terminal)
     try:
         with ros_context() as (ctx, ex):
             tester = Node("ns_tester", context=ctx)

@@ -14,7 +14,8 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from fcop_ros.ros.dds import large_image_profile, profile_env_vars
 from fcop_ros.synthetic import apply_noise, render_scene
-from ros_helpers import Recorder, frame_messages, ros_context, spin_until, stamp_ns
+from ros_helpers import (Recorder, as_at_a_terminal, frame_messages, ros_context, spin_until,
+                         stamp_ns)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BIN = os.path.dirname(sys.executable)
@@ -24,7 +25,7 @@ def _start(cmd, tmp_path, name, env=None):
     out = open(tmp_path / f"{name}.out", "w")
     err = open(tmp_path / f"{name}.err", "w")
     return subprocess.Popen(
-        cmd, stdout=out, stderr=err, env=env or os.environ.copy()
+        cmd, stdout=out, stderr=err, env=env or os.environ.copy(), preexec_fn=as_at_a_terminal
     ), tmp_path / f"{name}.err"
 
 

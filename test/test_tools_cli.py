@@ -16,6 +16,7 @@ import yaml
 from fcop_ros.tools import demo, make_bag as mb, nocs_eval, replay as rp
 from fcop_ros.tools.bagio import BagSource
 from fcop_ros.synthetic import SequenceSpec
+from ros_helpers import as_at_a_terminal
 
 ROOT = Path(__file__).resolve().parents[1]
 PARSERS = {"fcop_make_bag": mb.build_parser, "fcop_replay": rp.build_parser,
@@ -252,7 +253,7 @@ def test_ctrl_c_at_any_moment_gives_no_traceback(tmp_path, script, args, code, d
     for delay in delays:
         proc = subprocess.Popen([exe, *(a.format(tmp=tmp_path) for a in args)],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                env=env)
+                                env=env, preexec_fn=as_at_a_terminal)
         try:
             out, err = proc.communicate(timeout=delay)
             pytest.fail(f"{script} ended before the signal: {proc.returncode} {err}")
@@ -278,7 +279,7 @@ def test_ctrl_c_while_the_node_loads_its_kernels_is_quiet():
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOCALHOST_ONLY="1",
                PYTHONUNBUFFERED="1")
     proc = subprocess.Popen([exe], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=env)
+                            env=env, preexec_fn=as_at_a_terminal)
     try:
         seen = []
         for line in proc.stdout:  # ends at the node's exit, if it never says "preparing"
