@@ -45,3 +45,20 @@ def test_gradients_are_the_refits_at_a_moved_principal_point():
     for shift in ((2.0, 0.0), (-2.0, 0.0), (0.0, 2.0), (0.0, -2.0)):
         move = logf(shift) - base
         assert np.abs(move - g @ np.array(shift)).max() <= 0.35 * np.abs(move).max()
+
+
+def test_a_frame_hands_its_offsets_evidence_to_the_window():
+    """The evidence a frame carries is the offset it corrected by, from information the
+    objects' repeating errors alone bound (more of it than all their errors give), and none
+    where the principal point is given."""
+    from fcop_ros import estimate_focal
+    fr = clean_frame(3)
+    est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0, poses=False)
+    ev = est.principal_point_evidence
+    assert np.allclose(ev.offset, est.principal_point_offset)
+    assert np.all(np.linalg.eigvalsh(ev.repeating - ev.information) > -1e-12)
+    assert np.isclose(ev.gradient @ ev.covariance @ ev.gradient,
+                      est.std_rel_principal_point ** 2)
+    given = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0, poses=False,
+                           principal_point=(319.5, 239.5))
+    assert given.principal_point_evidence is None

@@ -37,7 +37,8 @@ from .correspondences import (
 from .error_model import depth_influence, object_variances
 from .object_fit import _plain_rows, fit_objects
 from .pose import ObjectPose, umeyama
-from .principal_point import focal_gradients, principal_point_offset
+from .principal_point import (PrincipalPointEvidence, focal_gradients, offset_information,
+                              offset_posterior)
 from .solver import object_votes, solve_triplets
 from .options import EstimatorOptions
 from .stabbing import interval_stabbing, stab_equal_width
@@ -67,7 +68,9 @@ class FocalEstimate:
     frame's objects move f with it, each by its own gradient, and it persists from frame to
     frame). principal_point_offset: (dx, dy) px, where the objects' disagreement puts an
     assumed principal point relative to it (their focal lengths are corrected by it; None where
-    the principal point is given). focal_votes: the stabbed value of the triplet votes.
+    the principal point is given). principal_point_evidence: what the frame's objects say of
+    that offset, which a :class:`~.window.FocalWindow` pools over its frames (None where the
+    principal point is given). focal_votes: the stabbed value of the triplet votes.
     interval: (lo, hi) focal range in pixels of the maximal consensus region. inlier_count /
     inlier_ratio: votes agreeing with it. votes_per_object / inliers_per_object:
     {instance_id: count}. object_focals: {instance_id: (focal, std_rel, std_rel_noise)} of the
@@ -103,6 +106,7 @@ class FocalEstimate:
     std_rel_prior: float | None = None
     std_rel_principal_point: float | None = None
     principal_point_offset: tuple[float, float] | None = None
+    principal_point_evidence: PrincipalPointEvidence | None = field(default=None, repr=False)
     votes_per_object: dict = field(default_factory=dict)
     inliers_per_object: dict = field(default_factory=dict)
     object_focals: dict = field(default_factory=dict)
@@ -772,8 +776,9 @@ def estimate_focal(
         # The offset of an assumed principal point that the objects' disagreement shows: their
         # focal lengths corrected by it, its remaining uncertainty into std_rel (.principal_point).
         grads = focal_gradients(support, f0, seed, pp_std, opt, logf)
-        delta, pp_cov = principal_point_offset(logf[good], var[good] + tau0**2, grads[good],
-                                               pp_std)
+        info, data = offset_information(logf[good], var[good] + tau0**2, grads[good])
+        delta, pp_cov = offset_posterior(info, data, pp_std)
+        logf_seen = logf[good]
         logf = logf - grads @ delta
         est.principal_point_offset = (float(delta[0]), float(delta[1]))
     comb = combine_objects(logf[good], var[good], fits.var_log_focal[good], tau0,
@@ -788,6 +793,14 @@ def estimate_focal(
     w_noise = 1.0 / np.minimum(fits.var_log_focal[idx_used], var[idx_used])
     g_frame = (w_noise[:, None] * grads[idx_used]).sum(0) / w_noise.sum()
     var_pp = float(g_frame @ pp_cov @ g_frame)
+    if np.any(pp_std > 0):
+        # The systematic budget repeats while these objects are in view; their noise and the
+        # objects' prior spread (the window's frames show it vary) renew.
+        noise = np.minimum(fits.var_log_focal[good], var[good])
+        repeating, _ = offset_information(logf_seen, np.maximum(var[good] - noise, 1e-12),
+                                          grads[good])
+        est.principal_point_evidence = PrincipalPointEvidence(
+            pp_std.copy(), delta, pp_cov, info, data, repeating, g_frame)
     for k, (inst, used) in enumerate(zip(kept, comb.used)):
         j = good_idx[k]
         if used:

@@ -12,7 +12,7 @@ the image with precise fits fix it.
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -45,23 +45,78 @@ def focal_gradients(support, f0: float, seed: int, pp_std, options, logf) -> np.
     return grads
 
 
+def offset_information(y, var, grads) -> tuple[np.ndarray, np.ndarray]:
+    """(I (2, 2), b (2,)): what objects with log focal lengths ``y``, variances ``var`` and
+    gradients ``grads`` (n, 2) say of the principal point's offset with the focal length free
+    (the Schur complement of a least-squares fit of y = log f + grads . delta): the offset's
+    information and its data vector, so that delta = (P^-1 + I)^-1 b under a zero-mean prior
+    of covariance P. Zero for one object, which cannot tell an offset from the focal length."""
+    y, w, grads = np.asarray(y, float), 1.0 / np.asarray(var, float), np.asarray(grads, float)
+    if y.size == 0:
+        return np.zeros((2, 2)), np.zeros(2)
+    gw = grads.T @ w
+    info = (grads * w[:, None]).T @ grads - np.outer(gw, gw) / w.sum()
+    data = (grads * w[:, None]).T @ y - gw * float(w @ y) / w.sum()
+    return info, data
+
+
+def offset_posterior(info, data, pp_std) -> tuple[np.ndarray, np.ndarray]:
+    """(delta (2,) px, its covariance (2, 2)) from the information ``info`` and data vector
+    ``data`` on the offset and a zero-mean prior of ``pp_std`` (px) per axis. An axis with no
+    prior spread stays at 0."""
+    std = np.asarray(pp_std, float)
+    free = std > 0
+    delta, cov = np.zeros(2), np.zeros((2, 2))
+    if not free.any():
+        return delta, cov
+    inv = np.linalg.inv(np.asarray(info, float)[np.ix_(free, free)]
+                        + np.diag(1.0 / std[free] ** 2))
+    delta[free] = inv @ np.asarray(data, float)[free]
+    cov[np.ix_(free, free)] = inv
+    return delta, cov
+
+
 def principal_point_offset(y, var, grads, pp_std) -> tuple[np.ndarray, np.ndarray]:
     """(delta (2,) px, its covariance (2, 2)): the principal point's offset from the assumed
     one that best explains the objects' log focal lengths ``y`` (variances ``var``, gradients
     ``grads`` (n, 2)), with a zero-mean prior of ``pp_std`` (px) per axis and the focal length
     free. An axis with no prior spread stays at 0."""
-    y, var, grads = np.asarray(y, float), np.asarray(var, float), np.asarray(grads, float)
-    std = np.asarray(pp_std, float)
-    free = std > 0
-    delta, cov = np.zeros(2), np.zeros((2, 2))
-    if not free.any() or y.size == 0:
-        return delta, cov
-    A = np.column_stack([np.ones(y.size), grads[:, free]])
-    w = 1.0 / var
-    info = (A * w[:, None]).T @ A
-    info[1:, 1:] += np.diag(1.0 / std[free] ** 2)
-    inv = np.linalg.inv(info)
-    sol = inv @ ((A * w[:, None]).T @ y)
-    delta[free] = sol[1:]
-    cov[np.ix_(free, free)] = inv[1:, 1:]
-    return delta, cov
+    return offset_posterior(*offset_information(y, var, grads), pp_std)
+
+
+@dataclass(frozen=True)
+class PrincipalPointEvidence:
+    """What one frame's objects say of an assumed principal point's offset, for a window to
+    pool over its frames (one frame's objects fix it loosely; many frames' fix it better).
+
+    prior_std: (2,) px, the prior's standard deviation per axis. offset, covariance: the
+    frame's own offset (px) and its covariance, by which its focal length was corrected.
+    information, data: the objects' information on the offset and its data vector
+    (:func:`offset_information`) from their whole variances. repeating: the information from
+    only the share of their variances that repeats while the same objects are in view (the
+    systematic budget: shape mismatch, unseen depth error), which bounds what any number of
+    frames of them can tell. gradient: (2,) d log f / d offset of the frame's focal length."""
+
+    prior_std: np.ndarray
+    offset: np.ndarray
+    covariance: np.ndarray
+    information: np.ndarray
+    data: np.ndarray
+    repeating: np.ndarray
+    gradient: np.ndarray
+
+
+def pooled_offset(evidence: list[PrincipalPointEvidence]) -> tuple[np.ndarray, np.ndarray]:
+    """(delta (2,) px, covariance (2, 2)): the offset that frames' ``evidence`` (of one prior)
+    tell together. Their errors that renew add up as independent frames' do (S, the sum of their
+    information); those that repeat are told once (R, the frames' mean repeating information):
+    the pooled data count as information (R^-1 + S^-1)^-1 = R (R + S)^-1 S, the frames' mean
+    offset seen through a repeating error of R^-1 and a renewing one of S^-1."""
+    std = evidence[-1].prior_std
+    S = np.sum([e.information for e in evidence], axis=0)
+    b = np.sum([e.data for e in evidence], axis=0)
+    R = np.mean([e.repeating for e in evidence], axis=0)
+    # pinv: frames of one object tell nothing (S = R = 0), frames of two only along a line.
+    through = R @ np.linalg.pinv(R + S)
+    info = through @ S
+    return offset_posterior(0.5 * (info + info.T), through @ b, std)
