@@ -5,8 +5,12 @@ import numpy as np
 from fcop_ros import EstimatorOptions
 from fcop_ros.core.correspondences import extract_instances
 from fcop_ros.core.object_fit import fit_objects
-from fcop_ros.core.principal_point import focal_gradients, principal_point_offset
+from fcop_ros.core.principal_point import focal_gradients, offset_information, offset_posterior
 from fcop_ros.synthetic.scenes import clean_frame
+
+
+def principal_point_offset(y, var, grads, pp_std):
+    return offset_posterior(*offset_information(y, var, grads), pp_std)
 
 
 def test_the_offset_that_explains_the_objects_is_found_and_one_object_pays_the_prior():

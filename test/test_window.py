@@ -1,5 +1,7 @@
 """The sliding window: evidence before a focal, averaging by uncertainty, honest uncertainty,
 zoom re-convergence, image-size changes, limits."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -575,8 +577,7 @@ def _window_error(ests, focal=600.0, pooled=True):
     w = FocalWindow(WindowOptions(max_frames=30))
     for t, e in enumerate(ests):
         if not pooled:
-            e = FocalEstimate(e.focal, e.principal_point, e.image_size, e.inlier_count,
-                              std_rel=e.std_rel, std_rel_noise=e.std_rel_noise)
+            e = replace(e, principal_point_evidence=None)
         we = w.add(e, float(t))
     return abs(np.log(we.focal / focal)), we.std_rel
 

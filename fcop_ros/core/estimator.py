@@ -771,14 +771,19 @@ def estimate_focal(
     raw_spread = np.array([_nocs_spread(i.p) for i in instances])
     var, tau0 = _object_budgets(support, fits, good, spread, raw_spread, opt)
     logf = np.log(fits.focal)
+    noise = np.minimum(fits.var_log_focal[good], var[good])  # as combine_objects clips it
     grads, pp_cov = np.zeros((len(support), 2)), np.zeros((2, 2))
-    if np.any(pp_std > 0):
+    assumed = bool(np.any(pp_std > 0))
+    if assumed:
         # The offset of an assumed principal point that the objects' disagreement shows: their
         # focal lengths corrected by it, its remaining uncertainty into std_rel (.principal_point).
         grads = focal_gradients(support, f0, seed, pp_std, opt, logf)
         info, data = offset_information(logf[good], var[good] + tau0**2, grads[good])
         delta, pp_cov = offset_posterior(info, data, pp_std)
-        logf_seen = logf[good]
+        # For the window: the systematic budget repeats while these objects are in view; their
+        # noise and the objects' prior spread (the window's frames show it vary) renew.
+        repeating, _ = offset_information(logf[good], np.maximum(var[good] - noise, 1e-12),
+                                          grads[good])
         logf = logf - grads @ delta
         est.principal_point_offset = (float(delta[0]), float(delta[1]))
     comb = combine_objects(logf[good], var[good], fits.var_log_focal[good], tau0,
@@ -790,15 +795,10 @@ def estimate_focal(
     var_pp_obj = np.einsum("oi,ij,oj->o", grads, pp_cov, grads)
     good_idx = np.flatnonzero(good)
     idx_used = good_idx[comb.used]
-    w_noise = 1.0 / np.minimum(fits.var_log_focal[idx_used], var[idx_used])
+    w_noise = 1.0 / noise[comb.used]
     g_frame = (w_noise[:, None] * grads[idx_used]).sum(0) / w_noise.sum()
     var_pp = float(g_frame @ pp_cov @ g_frame)
-    if np.any(pp_std > 0):
-        # The systematic budget repeats while these objects are in view; their noise and the
-        # objects' prior spread (the window's frames show it vary) renew.
-        noise = np.minimum(fits.var_log_focal[good], var[good])
-        repeating, _ = offset_information(logf_seen, np.maximum(var[good] - noise, 1e-12),
-                                          grads[good])
+    if assumed:
         est.principal_point_evidence = PrincipalPointEvidence(
             pp_std.copy(), delta, pp_cov, info, data, repeating, g_frame)
     for k, (inst, used) in enumerate(zip(kept, comb.used)):

@@ -76,14 +76,6 @@ def offset_posterior(info, data, pp_std) -> tuple[np.ndarray, np.ndarray]:
     return delta, cov
 
 
-def principal_point_offset(y, var, grads, pp_std) -> tuple[np.ndarray, np.ndarray]:
-    """(delta (2,) px, its covariance (2, 2)): the principal point's offset from the assumed
-    one that best explains the objects' log focal lengths ``y`` (variances ``var``, gradients
-    ``grads`` (n, 2)), with a zero-mean prior of ``pp_std`` (px) per axis and the focal length
-    free. An axis with no prior spread stays at 0."""
-    return offset_posterior(*offset_information(y, var, grads), pp_std)
-
-
 @dataclass(frozen=True)
 class PrincipalPointEvidence:
     """What one frame's objects say of an assumed principal point's offset, for a window to
