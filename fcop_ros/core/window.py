@@ -215,13 +215,17 @@ class FocalWindow:
         if self.options.max_age is not None:
             while self._frames and stamp - self._frames[0].stamp > self.options.max_age:
                 self._frames.popleft()
-        changed, zoom = self._detect_change()
-        self.current = self._estimate()
+        rated = self._rated()
+        changed, zoom = self._detect_change(rated)
+        # A change dropped the older frames or moved them: the window's frames are rated anew.
+        self.current = self._estimate(self._rated() if changed else rated)
         self.current.changed = changed or new_size
         self.current.zoom = zoom
         return self.current
 
     def _rated(self):
+        """(the frames with a focal length, their log focal lengths, variances less the prior
+        part and noise variances), the principal point's pooled offset applied."""
         rated = [f for f in self._frames if f.logf is not None]
         y = np.array([f.logf for f in rated])
         v = np.array([f.var - f.prior for f in rated])
@@ -243,11 +247,12 @@ class FocalWindow:
             v[at] = np.maximum(v[at] + np.einsum("ni,nij,nj->n", g, cov - own_cov, g), noise[at])
         return rated, y, v, noise
 
-    def _detect_change(self) -> tuple[bool, float | None]:
+    def _detect_change(self, rated) -> tuple[bool, float | None]:
         """(True, None) with the older frames dropped, or (True, the zoom) with them carried
         through it, when the newer frames moved away from the older and, where the frames carry
-        their objects' extents, the image scale moved with them; (False, None) otherwise."""
-        rated, y, v, noise = self._rated()
+        their objects' extents, the image scale moved with them; (False, None) otherwise.
+        ``rated``: :meth:`_rated` of the window's frames."""
+        rated, y, v, noise = rated
         k = self.options.change_frames
         n = y.size
         if n < 2 * k:
@@ -352,8 +357,9 @@ class FocalWindow:
             f.radii = {i: v + step for i, v in f.radii.items()}
         return float(np.exp(step))
 
-    def _estimate(self) -> WindowEstimate:
-        rated, y, v, noise = self._rated()
+    def _estimate(self, rated) -> WindowEstimate:
+        """The window's estimate from ``rated``, :meth:`_rated` of its frames."""
+        rated, y, v, noise = rated
         n_all = len(self._frames)
         support = int(sum(f.support for f in rated))
         if y.size < self.options.min_frames or y.size == 0:
