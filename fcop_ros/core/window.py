@@ -52,9 +52,10 @@ the focal lengths follow by more than half is a zoom at once. The split then mov
 ``change_frames`` of that scale's frames, to where the fewest frames lie on the side whose image
 scale they are further from (of the scale that tells the zoom best). Frames without any of the
 window's objects' sizes (hand-built estimates, or all objects cut by the image's edge) are
-skipped in a scale: it judges a split only with ``change_frames`` frames of its own on either
-side, and a split it finds starts at its first newer frame with sizes (newer frames without
-sizes before it go with the older frames).
+skipped in a scale: it judges a split with ``change_frames`` frames of its own after it and
+at least one before it (frames that were cut by the edge leave no more; its standard error
+counts how few), and a split it finds starts at its first newer frame with sizes (newer frames
+without sizes before it go with the older frames).
 
 Where the zoom is measured, the older frames are kept instead, at the new focal length. The
 objects' image radii measure it, from the ``change_frames`` frames on either side of the split
@@ -275,10 +276,11 @@ class FocalWindow:
 
         def judged(at, c):
             # The scale's split for the frames' split c, where change_frames frames with a
-            # scale lie on either side of it (frames without one, e.g. all objects cut by the
-            # image's edge, are skipped).
+            # scale lie after it and one at least before it (frames without one, e.g. all
+            # objects cut by the image's edge, are skipped; older ones never come back, and
+            # the standard error counts how few there are).
             cs = int(np.searchsorted(at, c))
-            return cs if k <= cs <= at.size - k else None
+            return cs if 1 <= cs <= at.size - k else None
 
         def stands(c, step):
             # Whether the scales let a step of the focal lengths at c stand: yes when one that
