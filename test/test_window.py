@@ -257,6 +257,40 @@ def test_a_scale_with_one_older_frame_still_judges_a_step():
     assert w.changes == 0 and r.frames == 12
 
 
+def test_a_scale_step_the_newest_frame_takes_back_is_no_zoom():
+    """Tuning `predicted` sequence 7033's first 15 frames (bench/world_accuracy.py
+    --first-sequence 7000): three objects, two of them 7-9 px in radius, whose masks grow and
+    shrink by a pixel together (20% of their radius). In frames 12 and 13 both are large and
+    the focal lengths 6-8% high: the image radii stepped by 11% at 7 standard errors, and the
+    focal lengths followed; in frame 14 both are back. A zoom persists, so the newest frame
+    must lie nearer the newer level than the older: no restart. Without that, the window
+    restarted at frame 14 (and the static 120 draws restarted 3 times, not 2)."""
+    rows = [
+        (2.77, 10.73, 0.17, 3.42, [28.51, 14.77, 11.86, 12.74], [22.02, 8.75, 7.47, 8.81]),
+        (1.92, 4.28, 0.17, 3.58, [26.75, 13.5, 13.21], [20.93, 8.05, 8.34]),
+        (2.56, 4.53, 0.14, 3.87, [27.85, 11.52, 11.93], [21.8, 6.86, 7.57]),
+        (5.24, 8.25, 0.17, 4.32, [27.34, 14.36, 11.72], [21.43, 8.6, 7.48]),
+        (3.50, 5.67, 0.17, 3.96, [28.51, 11.52, 11.83], [22.21, 6.95, 7.56]),
+        (2.56, 8.07, 0.20, 4.00, [28.92, 11.43, 13.11], [22.61, 6.97, 8.45]),
+        (3.20, 5.54, 0.17, 3.74, [28.66, 13.14, 12.95], [22.58, 7.99, 8.41]),
+        (4.73, 6.78, 0.18, 3.93, [28.0, 11.51, 12.93], [22.06, 7.04, 8.4]),
+        (2.05, 5.43, 0.19, 3.82, [27.06, 13.49, 13.0], [21.37, 8.17, 8.48]),
+        (4.72, 5.03, 0.46, 3.03, [28.64, 11.72, 14.45], [22.57, 7.11, 9.4]),
+        (3.18, 4.62, 0.21, 3.22, [28.9, 13.54, 11.53], [22.6, 8.19, 7.57]),
+        (2.50, 4.08, 0.21, 2.96, [28.75, 11.8, 12.96], [22.49, 7.17, 8.49]),
+        (8.58, 7.36, 0.49, 3.65, [28.01, 14.64, 14.34], [21.94, 8.95, 9.47]),
+        (10.94, 4.16, 0.59, 2.51, [26.9, 14.62, 14.26, 14.48], [21.14, 9.03, 9.46, 11.14]),
+        (3.24, 4.43, 0.14, 3.99, [27.33, 13.31, 12.85], [21.56, 8.25, 8.53]),
+    ]
+    w = FocalWindow(WindowOptions(max_frames=30))
+    for k, (err, std, noise, prior, extents, radii) in enumerate(rows):
+        e = estimate(453.0 * np.exp(err / 100), std / 100, std_rel_noise=noise / 100,
+                     extents=dict(enumerate(extents, 1)), radii=dict(enumerate(radii, 1)))
+        e.std_rel_prior = prior / 100
+        r = w.add(e, k / 30)
+    assert w.changes == 0 and r.frames == 15
+
+
 def _rescaled(rng, zoom=1.0, scale_jitter=0.06):
     """(extents, radii) of _scene's objects seen through a depth network that guesses its
     scale anew in every frame: the radii follow the zoom alone, the extents also that guess."""

@@ -48,14 +48,15 @@ moves it (it leaves the first). A scale judges only where no zoom and that zoom 
 standard errors apart (instance ids that do not follow the objects make it scatter). A step in
 the focal lengths stands if a scale that can judge it moved the same way by more than half as
 much, or if none can judge it. A step in an image scale (the same test, without a floor) that
-the focal lengths follow by more than half is a zoom at once. The split then moves, by at most
-``change_frames`` of that scale's frames, to where the fewest frames lie on the side whose image
-scale they are further from (of the scale that tells the zoom best). Frames without any of the
-window's objects' sizes (hand-built estimates, or all objects cut by the image's edge) are
-skipped in a scale: it judges a split with ``change_frames`` frames of its own after it and
-at least one before it (frames that were cut by the edge leave no more; its standard error
-counts how few), and a split it finds starts at its first newer frame with sizes (newer frames
-without sizes before it go with the older frames).
+the focal lengths follow by more than half, and that the newest frame keeps (by more than half:
+a zoom persists, masks grown by a pixel for two frames do not), is a zoom at once. The split
+then moves, by at most ``change_frames`` of that scale's frames, to where the fewest frames lie
+on the side whose image scale they are further from (of the scale that tells the zoom best).
+Frames without any of the window's objects' sizes (hand-built estimates, or all objects cut by
+the image's edge) are skipped in a scale: it judges a split with ``change_frames`` frames of
+its own after it and at least one before it (frames that were cut by the edge leave no more;
+its standard error counts how few), and a split it finds starts at its first newer frame with
+sizes (newer frames without sizes before it go with the older frames).
 
 Where the zoom is measured, the older frames are kept instead, at the new focal length. The
 objects' image radii measure it, from the ``change_frames`` frames on either side of the split
@@ -306,12 +307,14 @@ class FocalWindow:
             hit = c
         for scale, at in tracks if hit is None else ():
             # The image scale is told by pixels (and depth) alone, however the frames err: a
-            # step in it that the frames' focal lengths follow is a zoom, seen at once. The
-            # newer side starts at its first frame with a scale.
+            # step in it that the frames' focal lengths follow, and that its newest frame
+            # keeps, is a zoom, seen at once. The newer side starts at its first frame with a
+            # scale.
             if np.ptp(scale) > least:
                 cs, moved, z = _step(scale, k, None)
                 c = int(at[cs])
-                if z > sigma and abs(moved) > least and _agrees(_difference(y, c), moved):
+                if (z > sigma and abs(moved) > least and _agrees(_difference(y, c), moved)
+                        and _agrees(scale[-1] - np.median(scale[:cs]), moved)):
                     hit = c
                     break
         if hit is None:
