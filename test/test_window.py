@@ -234,6 +234,19 @@ def test_frames_without_extents_are_skipped_by_the_image_scale():
     assert _zoom_restarts(10, 40, every_fifth_cut) == [(22, 2)]
 
 
+def _replayed(focal, rows):
+    """(the window, its last estimate) after a world sequence's frames, each row (error %,
+    std_rel %, std_rel_noise %, std_rel_prior %, object extents, object radii) of the
+    sequence's estimate_focal on its frames, the objects' ids from 1."""
+    w = FocalWindow(WindowOptions(max_frames=30))
+    for k, (err, std, noise, prior, extents, radii) in enumerate(rows):
+        e = estimate(focal * np.exp(err / 100), std / 100, std_rel_noise=noise / 100,
+                     extents=dict(enumerate(extents, 1)), radii=dict(enumerate(radii, 1)))
+        e.std_rel_prior = prior / 100
+        r = w.add(e, k / 30)
+    return w, r
+
+
 def test_a_scale_with_one_older_frame_still_judges_a_step():
     """Tuning `predicted` sequence 7111's first 12 frames (bench/world_accuracy.py
     --first-sequence 7000): one object, cut by the image's edge in the first four frames (no
@@ -242,18 +255,13 @@ def test_a_scale_with_one_older_frame_still_judges_a_step():
     frame before the likeliest split and seven after; it can tell a 12% zoom from none and
     says none: no restart. When a scale needed three frames on either side to judge, the
     window restarted at frame 10 and kept the low frames, -10.3% at a stated 2.6%."""
-    rows = [(10.2, 7.2, 1.23, 6.7, None, None), (4.2, 7.5, 1.0, 6.8, None, None),
-            (3.2, 7.2, 0.9, 6.9, None, None), (-0.9, 8.2, 0.52, 7.0, None, None),
-            (-2.2, 9.6, 0.6, 7.0, 45.9, 52.0), (-4.1, 9.7, 0.59, 7.0, 45.6, 51.9),
-            (-4.2, 8.5, 0.62, 7.0, 46.1, 52.6), (-10.9, 8.5, 0.9, 6.9, 46.0, 52.9),
-            (-10.4, 7.2, 1.14, 6.7, 45.1, 52.3), (-10.7, 7.2, 0.94, 6.8, 45.1, 52.4),
-            (-9.4, 7.3, 0.9, 6.8, 44.8, 52.6), (-12.6, 6.9, 1.24, 6.5, 45.1, 53.0)]
-    w = FocalWindow(WindowOptions(max_frames=30))
-    for k, (err, std, noise, prior, extent, radius) in enumerate(rows):
-        e = estimate(1284.0 * np.exp(err / 100), std / 100, std_rel_noise=noise / 100,
-                     extents=extent and {1: extent}, radii=radius and {1: radius})
-        e.std_rel_prior = prior / 100
-        r = w.add(e, k / 30)
+    cut = [(10.2, 7.2, 1.23, 6.7), (4.2, 7.5, 1.0, 6.8), (3.2, 7.2, 0.9, 6.9),
+           (-0.9, 8.2, 0.52, 7.0)]
+    whole = [(-2.2, 9.6, 0.6, 7.0, [45.9], [52.0]), (-4.1, 9.7, 0.59, 7.0, [45.6], [51.9]),
+             (-4.2, 8.5, 0.62, 7.0, [46.1], [52.6]), (-10.9, 8.5, 0.9, 6.9, [46.0], [52.9]),
+             (-10.4, 7.2, 1.14, 6.7, [45.1], [52.3]), (-10.7, 7.2, 0.94, 6.8, [45.1], [52.4]),
+             (-9.4, 7.3, 0.9, 6.8, [44.8], [52.6]), (-12.6, 6.9, 1.24, 6.5, [45.1], [53.0])]
+    w, r = _replayed(1284.0, [row + ([], []) for row in cut] + whole)
     assert w.changes == 0 and r.frames == 12
 
 
@@ -282,12 +290,7 @@ def test_a_scale_step_the_newest_frame_takes_back_is_no_zoom():
         (10.94, 4.16, 0.59, 2.51, [26.9, 14.62, 14.26, 14.48], [21.14, 9.03, 9.46, 11.14]),
         (3.24, 4.43, 0.14, 3.99, [27.33, 13.31, 12.85], [21.56, 8.25, 8.53]),
     ]
-    w = FocalWindow(WindowOptions(max_frames=30))
-    for k, (err, std, noise, prior, extents, radii) in enumerate(rows):
-        e = estimate(453.0 * np.exp(err / 100), std / 100, std_rel_noise=noise / 100,
-                     extents=dict(enumerate(extents, 1)), radii=dict(enumerate(radii, 1)))
-        e.std_rel_prior = prior / 100
-        r = w.add(e, k / 30)
+    w, r = _replayed(453.0, rows)
     assert w.changes == 0 and r.frames == 15
 
 
