@@ -5,7 +5,7 @@
          | --heldout7 | --heldout8 | --heldout9 | --heldout10]
         [--parts single bias window zoom preset_bias pipes weights tau] [--objects N]
         [--set NAME=VALUE] [--orbit DEG] [--given-principal-point] [--first-sequence SEED]
-        [--world NAME=VALUE]
+        [--world NAME=VALUE] [--renew FAMILY]
 
 Tuned rows use the seeds the estimator's few constants were chosen on (frames from seed 1000,
 sequences from seed 5000, the tuning error model). Held-out rows (--heldout) use seeds from
@@ -82,8 +82,9 @@ from fcop_ros import FocalWindow, WindowOptions, estimate_focal, interval_stabbi
 from fcop_ros.core import PAPER_FCOP_IS, EstimatorOptions
 from fcop_ros.core.camera import image_centre
 from fcop_ros.core.stabbing import focal_intervals
-from fcop_ros.synthetic.world import (PIPE_FAMILIES, WORLD_PRESETS, ZERO_MEAN_FAMILIES,
-                                     ErrorFamilies, _jpeg, world_frame, world_frames)
+from fcop_ros.synthetic.world import (PIPE_FAMILIES, RENEWABLE, WORLD_PRESETS,
+                                     ZERO_MEAN_FAMILIES, ErrorFamilies, _jpeg, world_frame,
+                                     world_frames)
 from fcop_ros.tools.cli import HelpFormatter
 # bench/peers.py: the script's own folder is on the path when run as a script
 from peers import p4pf
@@ -94,6 +95,7 @@ OPTIONS = EstimatorOptions()
 OBJECTS = None
 ORBIT_DEG = 2.0  # the camera's orbit per frame in the sequences (world_frames' default)
 GIVEN_PP = False  # the sequences' estimates get the true principal point, not the centre
+RENEW = ()  # persistent error families the sequences draw anew in every frame (a diagnostic)
 WORLD = {}  # error-family bounds of the sequences' presets other than the presets' own
 
 
@@ -378,7 +380,7 @@ def run_sequence(preset, seed, n, variant, zoom=1.0):
     if WORLD:
         preset = replace(WORLD_PRESETS[preset], **WORLD)
     seq = world_frames(preset, seed, n, variant, zoom_frame=n // 2 if zoom != 1.0 else None,
-                       zoom_factor=zoom, objects=OBJECTS, orbit_deg=ORBIT_DEG)
+                       zoom_factor=zoom, objects=OBJECTS, orbit_deg=ORBIT_DEG, renew=RENEW)
     win = FocalWindow(WindowOptions(max_frames=30))
     rows = []
     for k, fr in enumerate(seq.frames):
@@ -524,12 +526,15 @@ def main() -> None:
     ap.add_argument("--first-sequence", type=int, default=None, metavar="SEED",
                     help="the sequences' first seed instead of the error model's (a trial: "
                     "other draws of the same world)")
+    ap.add_argument("--renew", nargs="+", default=[], choices=RENEWABLE, metavar="FAMILY",
+                    help="draw these persistent error families of the sequences anew in every "
+                    f"frame ({', '.join(RENEWABLE)}; a diagnostic of what the window averages)")
     ap.add_argument("--world", nargs="+", default=[], metavar="NAME=VALUE",
                     help="the sequences' error-family bounds other than the presets' own, e.g. "
                     "principal_point=0 (a trial)")
     args = ap.parse_args()
     OBJECTS = args.objects
-    ORBIT_DEG, GIVEN_PP = args.orbit, args.given_principal_point
+    ORBIT_DEG, GIVEN_PP, RENEW = args.orbit, args.given_principal_point, tuple(args.renew)
     for item in args.world:
         name, _, value = item.partition("=")
         WORLD[name] = float(value)
@@ -539,11 +544,12 @@ def main() -> None:
         default = getattr(EstimatorOptions(), name)
         given[name] = type(default)(value)
     OPTIONS = EstimatorOptions(**given)
-    if given or OBJECTS is not None or ORBIT_DEG != 2.0 or GIVEN_PP or WORLD:
+    if given or OBJECTS is not None or ORBIT_DEG != 2.0 or GIVEN_PP or WORLD or RENEW:
         print(f"settings: {given or 'defaults'}; objects per scene: {OBJECTS or '1 to 6'}; "
               f"orbit {ORBIT_DEG:g} deg per frame; principal point "
               f"{'given' if GIVEN_PP else 'assumed at the centre'} in the sequences; "
-              f"world {WORLD or 'as the presets'}\n")
+              f"world {WORLD or 'as the presets'}; renewed every frame: "
+              f"{', '.join(RENEW) or 'none'}\n")
     try:
         import pycolmap  # noqa: F401
         have_colmap = True

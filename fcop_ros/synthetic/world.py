@@ -358,6 +358,10 @@ _TYPICAL_SIZE = 0.17
 _SIZE_SPREAD = 0.3
 
 
+# Errors that persist over a sequence, which ``renew`` can draw anew in every frame instead.
+RENEWABLE = ("field", "shape", "relief", "offset")
+
+
 @dataclass
 class ErrorState:
     """What persists across the frames of one sequence under one draw of the error families."""
@@ -368,15 +372,23 @@ class ErrorState:
     scale: float = 1.0
     offset: float = 0.0
     fields: dict = field(default_factory=dict)
+    renew: frozenset = frozenset()
     objects: dict = field(default_factory=dict)
 
     @staticmethod
     def start(err: ErrorFamilies, rng: np.random.Generator,
-              variant: str = "tuning") -> "ErrorState":
+              variant: str = "tuning", renew=()) -> "ErrorState":
+        """``renew``: families among RENEWABLE that this state draws anew in every frame
+        instead of keeping (a diagnostic of what a window can average)."""
         if variant not in VARIANTS:
             raise ValueError(f"unknown error-model variant {variant!r}: one of {VARIANTS}")
-        st = ErrorState(err, variant)
+        if set(renew) - set(RENEWABLE):
+            raise ValueError(f"cannot renew {sorted(set(renew) - set(RENEWABLE))}: "
+                             f"one of {RENEWABLE}")
+        st = ErrorState(err, variant, renew=frozenset(renew))
         st.rho = float(np.sqrt(1.0 - err.field_drift)) if err.field_drift > 0 else 1.0
+        if "field" in st.renew:
+            st.rho = 0.0
         st.scale = float(np.exp(rng.normal(0, err.depth_scale))) if err.depth_scale > 0 else 1.0
         st.offset = float(rng.normal(0, err.offset)) if err.offset > 0 else 0.0
         return st
@@ -544,6 +556,11 @@ class ErrorState:
             ob = {"shape": 1.0 + rng.uniform(-e.shape, e.shape, 3) if e.shape > 0 else np.ones(3),
                   "relief": float(rng.uniform(-e.relief, e.relief)) if e.relief > 0 else 0.0}
             self.objects[iid] = ob
+            return ob
+        if "shape" in self.renew and e.shape > 0:
+            ob["shape"] = 1.0 + rng.uniform(-e.shape, e.shape, 3)
+        if "relief" in self.renew and e.relief > 0:
+            ob["relief"] = float(rng.uniform(-e.relief, e.relief))
         elif e.relief > 0:
             ob["relief"] = float(np.clip(ob["relief"] + rng.normal(0, 0.3 * e.relief),
                                          -e.relief, e.relief))
@@ -553,6 +570,8 @@ class ErrorState:
 def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> Frame:
     """The frame as the predictors would see it under ``state`` (which this call advances)."""
     e = state.err
+    if "offset" in state.renew and e.offset > 0:
+        state.offset = float(rng.normal(0, e.offset))
     depth, nocs, mask = frame.depth.copy(), frame.nocs.copy(), frame.mask.copy()
     h, w = depth.shape
     finite = np.isfinite(depth)
@@ -1291,10 +1310,10 @@ def world_scene(rng: np.random.Generator, spec: SceneSpec = SceneSpec(), focal=N
 def world_frames(preset: str | ErrorFamilies, seed: int, n_frames: int = 1,
                  variant: str = "tuning", spec: SceneSpec = SceneSpec(), focal=None, size=None,
                  objects=None, orbit_deg: float = 2.0, zoom_frame: int | None = None,
-                 zoom_factor: float = 1.0) -> WorldSequence:
+                 zoom_factor: float = 1.0, renew=()) -> WorldSequence:
     """A sequence of ``n_frames`` frames of one random scene seen by a slowly orbiting camera,
     under one random draw of the preset's error families (``zoom_factor`` multiplies the focal
-    length from ``zoom_frame`` on)."""
+    length from ``zoom_frame`` on; ``renew``: see :meth:`ErrorState.start`)."""
     from scipy.spatial.transform import Rotation
 
     from .render import SceneObject
@@ -1303,7 +1322,7 @@ def world_frames(preset: str | ErrorFamilies, seed: int, n_frames: int = 1,
     rng = np.random.default_rng(seed)
     objs, f, (centre, up), (w, h) = world_scene(rng, spec, focal, size, objects)
     errors = fam.draw(rng)
-    state = ErrorState.start(errors, rng, variant)
+    state = ErrorState.start(errors, rng, variant, renew)
     pp = _principal_point(errors.principal_point if variant == "tuning" else 0.0, seed, w, h)
     out = []
     for k in range(n_frames):
