@@ -327,3 +327,15 @@ def test_truth_without_a_focal_length_leaves_the_truth_columns_empty(tmp_path):
     rows = (tmp_path / "e.csv").read_text().splitlines()
     assert [r.split(",")[-2:] for r in rows[1:]] == [["", ""], ["", ""], ["600.0000", "0.1667"]]
     assert summary.errors_pct == [pytest.approx(0.1666667)]
+
+
+def test_one_topic_for_two_images_is_refused(bag, tmp_path, capsys):
+    """The mask's topic given for the NOCS too: refused before --out is touched (before, its
+    encoding went unchecked, the node dropped every frame and the replay waited out its
+    timeout, then said the machine might be overloaded)."""
+    argv = args(bag, tmp_path / "o")
+    argv[argv.index("--nocs-topic") + 1] = mb.TOPICS["mask"]
+    assert rp.main(argv) == 2
+    assert ("--nocs-topic, --mask-topic name the same topic"
+            in one_line(capsys.readouterr().err))
+    assert not (tmp_path / "o").exists()

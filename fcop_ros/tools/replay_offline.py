@@ -150,6 +150,12 @@ def replay(
     params = node_parameters(params_file, overrides)
     if not str(out_dir):
         raise ReplayError("--out is empty: give the output directory ('.' for this one)")
+    named = {"depth": depth_topic, "nocs": nocs_topic, "mask": mask_topic}
+    if len(set(named.values())) < len(named):
+        twice = ", ".join(f"--{r}-topic" for r, t in named.items()
+                          if list(named.values()).count(t) > 1)
+        raise ReplayError(f"{twice} name the same topic: depth, NOCS and mask are three "
+                          "images, each on its own topic")
     use_large_image_profile()
     import rclpy
     from rclpy.context import Context
@@ -274,8 +280,9 @@ def replay(
             """Write what the node published for the frames handed over so far."""
 
             def caught_up():
+                # A frame the estimator skipped for a newer one is answered by that one.
                 n = node.counts
-                return n.processed >= n.matched and node.idle()
+                return n.processed + n.skipped >= n.matched and node.idle()
 
             spin_until(caught_up)
             publish = {
