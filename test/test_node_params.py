@@ -45,6 +45,10 @@ def values(status):
     # rclpy's InvalidServiceNameException was a traceback (a newcomer's review, stop 27).
     ("set_camera_info_service:=set info",
      ["set_camera_info_service='set info'", "a service name (topic name must not contain"]),
+    # rclpy's own parameter of the wrong type raised InvalidParameterTypeException, a traceback
+    # (a hostile user's trial, stop 38).
+    ("use_sim_time:=maybe", ["use_sim_time", "to 'maybe' of type 'STRING', expecting type "
+                                             "'BOOL'"]),
 ])
 def test_bad_parameter_at_start_up_is_one_line_and_exit_2(arg, expected):
     exe = os.path.join(BIN, "fcop_node")

@@ -734,6 +734,9 @@ def main(args=None) -> int:
     except ParameterError as exc:
         print(f"fcop_node: {exc}", file=sys.stderr)
         return 2
+    except ParameterException as exc:  # rclpy's own parameters, e.g. use_sim_time: 1
+        print(f"fcop_node: parameter not allowed: {exc}", file=sys.stderr)
+        return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RCLError:
