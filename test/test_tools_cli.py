@@ -151,6 +151,7 @@ def test_make_bag_cli_compression_default_and_errors(tmp_path, capsys):
     # A hostile user's: every stamp the same, and stamps whose seconds wrap negative.
     (["--rate", "1e10"], "--rate 1e+10 Hz is above 1e9 Hz"),
     (["--rate", "1e-9"], "beyond 2038"),
+    (["--rate", "1e-300"], "beyond 2038"),  # 1e9 / rate is inf: an OverflowError before
     (["--zoom-frame", "10", "--zoom-focal", "700"], "the zoom frame 10 is not one of the 4"),
     (["--zoom-frame", "2", "--zoom-focal", "-1"], "zoom focal must be a positive number"),
     (["--objects", "0"], "need at least one frame, one object"),

@@ -35,7 +35,10 @@ def _stamp_step(rate: float, frames: int, start_ns: int) -> int:
     distinct (above 1 GHz) or the last would not fit builtin_interfaces/Time (int32 seconds)."""
     if not (math.isfinite(rate) and rate > 0):
         raise ValueError(f"--rate must be a positive number of frames per second, got {rate}")
-    step = int(round(1e9 / rate))
+    step = 1e9 / rate
+    if step >= 2**31 * 10**9:  # no second frame fits before 2038, nor does int() take inf
+        step = 2**31 * 10**9
+    step = int(round(step))
     if step < 1:
         raise ValueError(f"--rate {rate:g} Hz is above 1e9 Hz: the frames' nanosecond stamps "
                          "would repeat")
