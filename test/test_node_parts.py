@@ -737,6 +737,21 @@ def test_calibration_file_round_trips_through_yaml(tmp_path):
     assert [p.name for p in path.parent.iterdir()] == ["cam.yaml"]  # no temporary file left
 
 
+def test_a_failed_calibration_write_leaves_no_temporary_file(tmp_path):
+    """A calibration_file that is a directory: the rename fails (OSError, which the service
+    answers with) and the temporary file beside it goes (before, it stayed)."""
+    import pytest
+
+    from fcop_ros.ros.calibration import write_calibration
+    from msg_adapters import camera_info
+
+    (tmp_path / "isdir.yaml").mkdir()
+    with pytest.raises(OSError):
+        write_calibration(str(tmp_path / "isdir.yaml"), camera_info(600.0, 320, 240, 640, 480),
+                          "front")
+    assert [p.name for p in tmp_path.iterdir()] == ["isdir.yaml"]
+
+
 def test_save_calibration_says_where_and_what_or_why_not(tmp_path, monkeypatch):
     """The service's outcome without a node: the path (calibration_file, else
     camera_info_manager's default under $HOME), the message, and a refusal to write."""

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 
@@ -50,6 +51,11 @@ def write_calibration(path: str, info, camera_name: str) -> None:
     so a reader never sees half a file; raises OSError."""
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "w") as fh:
-        fh.write(calibration_yaml(info, camera_name))
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w") as fh:
+            fh.write(calibration_yaml(info, camera_name))
+        os.replace(tmp, path)
+    except BaseException:  # e.g. path is a directory: leave nothing behind
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
