@@ -218,9 +218,10 @@ def test_combine_objects_as_on_numpy_arrays():
 
 @needs_numba
 def test_extent_agrees(monkeypatch):
-    """An object's RMS image radius and median depth (its extent's factors), compiled and in
-    numpy, agree to 1e-12 relative for odd and even counts (the median of an even count is the
-    mean of the middle two) and points far from the principal point."""
+    """An object's image scale (RMS image radius over RMS NOCS radius) and median depth (its
+    extent's factors), compiled and in numpy, agree to 1e-12 relative for odd and even counts
+    (the median of an even count is the mean of the middle two) and points far from the
+    principal point."""
     from fcop_ros.core.correspondences import Instance
 
     rng = np.random.default_rng(22)
@@ -229,7 +230,7 @@ def test_extent_agrees(monkeypatch):
             x = rng.normal(size=(n, 2)) * 50.0 + rng.normal(size=2) * 300.0
             d = rng.uniform(0.4, 2.0, n)
             inst = Instance(1, x, d, rng.random((n, 3)), np.zeros(n), 0.0, 0.0, n, n)
-            fast, slow = _both_ways(monkeypatch, lambda: estimator._radius_depth(inst))
+            fast, slow = _both_ways(monkeypatch, lambda: estimator._image_scale_depth(inst))
             np.testing.assert_allclose(fast, slow, rtol=1e-12, atol=0)
 
 

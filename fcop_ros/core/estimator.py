@@ -82,12 +82,14 @@ class FocalEstimate:
     instances: the :class:`~.correspondences.Instance` s of the combined objects whose own
     std_rel is within ``pose_max_std`` (those that can be posed), the input of the pose stage:
     ``estimate_poses(est.instances, focal, exclude=est.mirrored)`` at any focal length, e.g. a
-    window's. object_extents: {instance_id: RMS image radius x median depth (px m)} of all the
-    combined objects, except those the image's edge cuts: the focal length times the object's
-    size, whatever its NOCS say. A zoom scales it;
-    moving the camera or the object does not (the depth makes up for the image size), so the
-    window tells a zoom from frames whose errors moved by it. object_radii: the same objects'
-    RMS image radius alone (px), which a depth network's frame-to-frame change of scale does
+    window's. object_extents: {instance_id: image scale x median depth (px m per NOCS unit)}
+    of all the combined objects, except those the image's edge cuts, where the image scale is
+    the object's RMS image radius over the RMS radius of its NOCS: the focal length times the
+    object's size (metres per NOCS unit), whatever part of it is in view. A zoom scales it;
+    moving the camera or the object does not (the depth makes up for the image size), nor does
+    an occlusion (pixels and NOCS go together), so the window tells a zoom from frames whose
+    errors moved by it. object_radii: the same objects' image scale alone (px per NOCS unit),
+    which a depth network's frame-to-frame change of scale does
     not move. image_size: (width, height), as in CameraInfo (numpy's shape is (height, width)).
     std_rel and std_rel_noise are None where the estimate has no per-object fit to draw them
     from: ``method="ransac"``, ``refine=False``, ``PAPER_FCOP_IS``. Two estimates compare equal
@@ -122,30 +124,48 @@ class FocalEstimate:
     object_radii: dict = field(default_factory=dict)
 
 
-def _radius_depth(inst: Instance) -> tuple[float, float]:
-    """The instance's RMS image radius about its centroid (px) and its median depth (m)."""
-    if compiled.ENABLED and inst.x.dtype == np.float64 and inst.d.dtype == np.float64:
-        r, d = _radius_depth_kernel(np.ascontiguousarray(inst.x), inst.d)
+def _image_scale_depth(inst: Instance) -> tuple[float, float]:
+    """The instance's image scale, its pixels' RMS image radius about their centroid over their
+    NOCS' RMS radius about theirs (px per NOCS unit), and its median depth (m). A zoom scales it;
+    a part of the object hidden (occlusion) takes pixels and NOCS alike and leaves it."""
+    if compiled.ENABLED and all(a.dtype == np.float64 for a in (inst.x, inst.d, inst.p)):
+        r, d = _image_scale_depth_kernel(np.ascontiguousarray(inst.x), inst.d,
+                                         np.ascontiguousarray(inst.p))
         return float(r), float(d)
     r = inst.x - inst.x.mean(0)
-    return float(np.sqrt(np.mean(r[:, 0] ** 2 + r[:, 1] ** 2))), float(np.median(inst.d))
+    q = inst.p - inst.p.mean(0)
+    rn = max(float(np.sqrt(np.mean((q * q).sum(1)))), _MIN_NOCS_RADIUS)
+    return float(np.sqrt(np.mean(r[:, 0] ** 2 + r[:, 1] ** 2))) / rn, float(np.median(inst.d))
+
+
+# NOCS spread below which an object's image scale is not told apart from none (objects whose
+# NOCS are flat are refused long before: _FLAT).
+_MIN_NOCS_RADIUS = 1e-6
 
 
 @compiled.kernel
-def _radius_depth_kernel(x, d):
-    """``_radius_depth`` in two passes over x and a selection of d's median (numpy's few calls
-    on an axis of two cost more than the arithmetic: 0.7 ms for a frame's five objects)."""
+def _image_scale_depth_kernel(x, d, p):
+    """``_image_scale_depth`` in two passes over x and p and a selection of d's median (numpy's
+    few calls on an axis of two or three cost more than the arithmetic)."""
     n = x.shape[0]
     m0 = m1 = 0.0
+    q0 = q1 = q2 = 0.0
     for r in range(n):
         m0 += x[r, 0]
         m1 += x[r, 1]
-    m0, m1 = m0 / n, m1 / n
+        q0 += p[r, 0]
+        q1 += p[r, 1]
+        q2 += p[r, 2]
+    m0, m1, q0, q1, q2 = m0 / n, m1 / n, q0 / n, q1 / n, q2 / n
     s = 0.0
+    sn = 0.0
     for r in range(n):
         u, v = x[r, 0] - m0, x[r, 1] - m1
         s += u * u + v * v
-    return np.sqrt(s / n), (_median_k(d.copy(), d.size) if d.size else np.nan)
+        a, b, c = p[r, 0] - q0, p[r, 1] - q1, p[r, 2] - q2
+        sn += a * a + b * b + c * c
+    rn = max(np.sqrt(sn / n), _MIN_NOCS_RADIUS)
+    return np.sqrt(s / n) / rn, (_median_k(d.copy(), d.size) if d.size else np.nan)
 
 
 def _no_instance_reason(depth, nocs, mask, opt: EstimatorOptions) -> str:
@@ -871,7 +891,7 @@ def _finish(
         return est
     est.focal, est.std_rel, est.instances = focal, std_rel, list(instances)
     sizes = {
-        inst.instance_id: _radius_depth(inst)
+        inst.instance_id: _image_scale_depth(inst)
         for inst in (instances if measured is None else measured)
         if not inst.at_border
     }
