@@ -329,12 +329,15 @@ def test_truth_without_a_focal_length_leaves_the_truth_columns_empty(tmp_path):
     assert summary.errors_pct == [pytest.approx(0.1666667)]
 
 
-def test_one_topic_for_two_images_is_refused(bag, tmp_path, capsys):
-    """The mask's topic given for the NOCS too: refused before --out is touched (before, its
-    encoding went unchecked, the node dropped every frame and the replay waited out its
-    timeout, then said the machine might be overloaded)."""
+@pytest.mark.parametrize("play", [False, True])
+def test_one_topic_for_two_images_is_refused(bag, tmp_path, capsys, play):
+    """The mask's topic given for the NOCS too: refused before --out is touched or anything is
+    played (before, offline, its encoding went unchecked, the node dropped every frame and the
+    replay waited out its timeout, then said the machine might be overloaded)."""
     argv = args(bag, tmp_path / "o")
     argv[argv.index("--nocs-topic") + 1] = mb.TOPICS["mask"]
+    if play:  # without the options play ignores (each would add a line)
+        argv = argv[:argv.index("--truth-topic")] + ["--play"]
     assert rp.main(argv) == 2
     assert ("--nocs-topic, --mask-topic name the same topic"
             in one_line(capsys.readouterr().err))

@@ -70,6 +70,16 @@ def check_topics(source: BagSource, wanted: dict) -> None:
             )
 
 
+def check_distinct(inputs: dict) -> None:
+    """inputs: {role: topic}; ReplayError when two roles name one topic (its messages would be
+    read as two kinds of image), before the bag is opened."""
+    topics = list(inputs.values())
+    twice = [f"--{role}-topic" for role, topic in inputs.items() if topics.count(topic) > 1]
+    if twice:
+        raise ReplayError(f"{', '.join(twice)} name the same topic: depth, NOCS and mask are "
+                          "three images, each on its own topic")
+
+
 def check_not_empty(source: BagSource, inputs: dict) -> None:
     """inputs: {role: topic}; ReplayError naming the first input topic without a message: no
     frame could be estimated from it, offline or played."""

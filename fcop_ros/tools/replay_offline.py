@@ -17,6 +17,7 @@ from .replay_base import (
     OutputError,
     ReplayError,
     ReplaySummary,
+    check_distinct,
     check_not_empty,
     check_topics,
     writing,
@@ -150,12 +151,8 @@ def replay(
     params = node_parameters(params_file, overrides)
     if not str(out_dir):
         raise ReplayError("--out is empty: give the output directory ('.' for this one)")
-    named = {"depth": depth_topic, "nocs": nocs_topic, "mask": mask_topic}
-    if len(set(named.values())) < len(named):
-        twice = ", ".join(f"--{r}-topic" for r, t in named.items()
-                          if list(named.values()).count(t) > 1)
-        raise ReplayError(f"{twice} name the same topic: depth, NOCS and mask are three "
-                          "images, each on its own topic")
+    inputs = {"depth": depth_topic, "nocs": nocs_topic, "mask": mask_topic}
+    check_distinct(inputs)
     use_large_image_profile()
     import rclpy
     from rclpy.context import Context
@@ -171,7 +168,6 @@ def replay(
     from ..ros.node import FcopNode
     from ..ros.topics import OUTPUTS, type_name
 
-    inputs = {"depth": depth_topic, "nocs": nocs_topic, "mask": mask_topic}
     source = BagSource(bag)
     summary.metadata_problem = source.metadata_problem
     wanted = {role: (t, IMAGE_TYPE) for role, t in inputs.items()}

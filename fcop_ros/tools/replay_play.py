@@ -11,7 +11,8 @@ from dataclasses import dataclass
 from ..ros.dds import use_large_image_profile
 from ..ros.topics import INPUTS
 from .bagio import BagSource
-from .replay_base import IMAGE_TYPE, ReplayError, check_not_empty, check_topics
+from .replay_base import (IMAGE_TYPE, ReplayError, check_distinct, check_not_empty,
+                          check_topics)
 
 
 @dataclass
@@ -123,6 +124,7 @@ def play(
     _check_numbers(rate, clock_hz, wait_subscribers)
     say = say or (lambda line: None)
     inputs = dict(zip(INPUTS, image_topics, strict=True))
+    check_distinct(inputs)
     source = BagSource(bag)
     try:
         check_topics(source, {role: (t, IMAGE_TYPE) for role, t in inputs.items()})
