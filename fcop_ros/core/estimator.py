@@ -124,6 +124,11 @@ class FocalEstimate:
     object_radii: dict = field(default_factory=dict)
 
 
+# NOCS spread below which an object's image scale is not told apart from none (objects whose
+# NOCS are flat are refused long before: _FLAT).
+_MIN_NOCS_RADIUS = 1e-6
+
+
 def _image_scale_depth(inst: Instance) -> tuple[float, float]:
     """The instance's image scale, its pixels' RMS image radius about their centroid over their
     NOCS' RMS radius about theirs (px per NOCS unit), and its median depth (m). A zoom scales it;
@@ -136,11 +141,6 @@ def _image_scale_depth(inst: Instance) -> tuple[float, float]:
     q = inst.p - inst.p.mean(0)
     rn = max(float(np.sqrt(np.mean((q * q).sum(1)))), _MIN_NOCS_RADIUS)
     return float(np.sqrt(np.mean(r[:, 0] ** 2 + r[:, 1] ** 2))) / rn, float(np.median(inst.d))
-
-
-# NOCS spread below which an object's image scale is not told apart from none (objects whose
-# NOCS are flat are refused long before: _FLAT).
-_MIN_NOCS_RADIUS = 1e-6
 
 
 @compiled.kernel

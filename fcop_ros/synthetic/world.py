@@ -386,9 +386,8 @@ class ErrorState:
             raise ValueError(f"cannot renew {sorted(set(renew) - set(RENEWABLE))}: "
                              f"one of {RENEWABLE}")
         st = ErrorState(err, variant, renew=frozenset(renew))
-        st.rho = float(np.sqrt(1.0 - err.field_drift)) if err.field_drift > 0 else 1.0
-        if "field" in st.renew:
-            st.rho = 0.0
+        st.rho = (0.0 if "field" in st.renew
+                  else float(np.sqrt(1.0 - err.field_drift)) if err.field_drift > 0 else 1.0)
         st.scale = float(np.exp(rng.normal(0, err.depth_scale))) if err.depth_scale > 0 else 1.0
         st.offset = float(rng.normal(0, err.offset)) if err.offset > 0 else 0.0
         return st

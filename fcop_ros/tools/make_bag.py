@@ -35,10 +35,8 @@ def _stamp_step(rate: float, frames: int, start_ns: int) -> int:
     distinct (above 1 GHz) or the last would not fit builtin_interfaces/Time (int32 seconds)."""
     if not (math.isfinite(rate) and rate > 0):
         raise ValueError(f"--rate must be a positive number of frames per second, got {rate}")
-    step = 1e9 / rate
-    if step >= 2**31 * 10**9:  # no second frame fits before 2038, nor does int() take inf
-        step = 2**31 * 10**9
-    step = int(round(step))
+    # Capped where no second frame fits before 2038 anyway: int() takes no inf.
+    step = int(round(min(1e9 / rate, 2**31 * 10**9)))
     if step < 1:
         raise ValueError(f"--rate {rate:g} Hz is above 1e9 Hz: the frames' nanosecond stamps "
                          "would repeat")
