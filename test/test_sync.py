@@ -113,7 +113,7 @@ def test_approximate_matching_with_slop():
 
 def test_approximate_rejects_beyond_slop():
     sync = StampSynchronizer(2, queue_size=5, slop=0.001)
-    sets = run(sync, [(0, 0), (1, 3 * MS), (0, 3 * MS + 500_000)])
+    sets = run(sync, [(0, 0), (1, 3 * MS), (0, 3 * MS + 500_000), (1, 6 * MS)])
     assert len(sets) == 1 and sets[0] == [(0, 3 * MS + 500_000), (1, 3 * MS)]
     assert sync.stats.dropped["unmatched"] == 1
 
@@ -196,7 +196,8 @@ def test_configure_keeps_queued_messages():
         and sync.stats.per_input[("queue_full", 0)] == 2
         and sync.slop_ns == 2 * MS
     )
-    assert len(run(sync, [(1, 4 * MS + MS), (2, 4 * MS)])) == 1
+    sets = run(sync, [(1, 5 * MS), (2, 5 * MS), (0, 6 * MS)])
+    assert [[m[1] for m in s] for s in sets] == [[4 * MS, 5 * MS, 5 * MS]]
 
 
 def test_queue_bound_and_bad_arguments():
@@ -214,3 +215,38 @@ def test_each_permutation_of_one_frame(perm):
     sync = StampSynchronizer(3)
     sets = run(sync, [(i, 7) for i in perm])
     assert len(sets) == 1 and sets[0] == [(0, 7), (1, 7), (2, 7)]
+
+
+def test_approximate_pairs_each_set_with_the_closest_stamps_not_the_oldest():
+    """A NOCS network that answers every third depth image, its output (stamped as its own depth
+    image) arriving after the next depth image: with a slop of 1.5 frames each NOCS must be paired
+    with its own depth image, not with an older one that happens to lie within the slop."""
+    sync = StampSynchronizer(3, queue_size=10, slop=0.050)
+    events = []
+    for k in range(12):
+        events.append((0, k * 33 * MS))
+        if k % 3 == 1:
+            events += [(1, (k - 1) * 33 * MS), (2, (k - 1) * 33 * MS)]
+    sets = run(sync, events)
+    check_invariants(sets, 3)
+    assert [[m[1] // (33 * MS) for m in s] for s in sets] == [[0, 0, 0], [3, 3, 3], [6, 6, 6],
+                                                              [9, 9, 9]]
+
+
+def test_approximate_waits_for_a_closer_partner_only_while_one_can_come():
+    """Depth lags the other two by a frame: the set waits for its own depth image (a closer one
+    can still come) but, once the input's rate is known, not for one that cannot be closer."""
+    sync = StampSynchronizer(3, queue_size=10, slop=0.050)
+    sets = run(sync, [(0, 0), (1, 33 * MS), (2, 33 * MS)])
+    assert sets == []  # depth 0 lies within the slop of 33 ms, but depth 33 ms may follow
+    sets = run(sync, [(0, 33 * MS)])
+    assert [[m[1] for m in s] for s in sets] == [[33 * MS] * 3]
+    jitter = StampSynchronizer(3, queue_size=10, slop=0.005)
+    for k in range(1, 6):
+        base = k * 33 * MS
+        sets = run(jitter, [(0, base + MS), (1, base - MS), (2, base + 2 * MS)])
+    # Once the rate is known, each set goes out with its last message: the depth input's next
+    # image is at least half a frame interval away, farther than its 1 ms from the set.
+    assert [[m[1] for m in s] for s in sets] == [[(5 * 33 + 1) * MS, (5 * 33 - 1) * MS,
+                                                  (5 * 33 + 2) * MS]]
+    assert jitter.stats.matched == 5 and jitter.pending() == 0

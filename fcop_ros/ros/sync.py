@@ -1,11 +1,15 @@
 """Stamp synchroniser for N input streams (message_filters is not on PyPI): plain Python, no rclpy.
 
 Policy. Each input keeps a queue sorted by stamp (bounded: the oldest is dropped past
-``queue_size``). Whenever every queue holds a message, look at the oldest of each: if they lie
-within ``slop`` of each other (exact matching: slop 0, equal stamps), they form a set, which is
-emitted; otherwise the oldest of them can never be matched (every other input already holds
-only newer messages past the slop) and is dropped. So each message is used at most once, sets
-come out in increasing stamp order, and nothing waits longer than the slowest input.
+``queue_size``). Whenever every queue holds a message, the newest of the queues' oldest
+messages is the pivot: every later set holds a message at or after it, so a message more than
+``slop`` before it can never be matched and is dropped. Otherwise each input offers its message
+nearest the pivot, and the set goes out once no nearer one can still arrive: the input has a
+message at or after the pivot, or its next one, at least half its usual interval after its
+last, would be farther (like message_filters' ApproximateTime, which also waits; its Python
+version pairs with the nearest message already queued, right or not). Exact matching (slop 0)
+needs equal stamps. So each message is used at most once, sets come out in increasing stamp
+order, a set holds the nearest stamps, and nothing waits longer than the slowest input.
 
 Outlier stamps. Before a message reaches its queue, its stamp is compared with the input's
 previous accepted stamp: a stamp more than ``reset_after`` seconds back, or further ahead than
@@ -206,6 +210,7 @@ class StampSynchronizer:
                 self.accepted.append((index, stamp_ns, msg))
                 return []
         q = self._queues[index]
+        q = self._queues[index]
         keys = [s for s, _ in q]
         pos = bisect.bisect_left(keys, stamp_ns)
         if pos < len(q) and q[pos][0] == stamp_ns:
@@ -222,16 +227,51 @@ class StampSynchronizer:
         out = []
         while all(self._queues):
             heads = [q[0][0] for q in self._queues]
-            lo, hi = min(heads), max(heads)
-            if hi - lo <= self.slop_ns:
-                msgs = [q.pop(0)[1] for q in self._queues]
-                for used, h in zip(self._used, heads):
-                    used.append(h)
-                self._last = hi
-                self.stats.matched += 1
-                out.append((heads[0], msgs))
-            else:
-                i = heads.index(lo)
+            hi = max(heads)
+            if hi - min(heads) > self.slop_ns:
+                # Every later set holds a message at or after ``hi`` (the oldest of its input):
+                # a head more than the slop before it can never be matched.
+                i = heads.index(min(heads))
                 self._queues[i].pop(0)
                 self.stats.drop("unmatched", i)
+                continue
+            picks = [self._closest(i, hi) for i in range(self.n)]
+            if any(p is None for p in picks):
+                break  # a closer partner may still come
+            stamps = [q[k][0] for q, k in zip(self._queues, picks)]
+            if max(stamps) - min(stamps) > self.slop_ns:
+                i = heads.index(min(heads))
+                self._queues[i].pop(0)
+                self.stats.drop("unmatched", i)
+                continue
+            msgs = []
+            for i, (q, k) in enumerate(zip(self._queues, picks)):
+                if k:
+                    self.stats.drop("unmatched", i, k)
+                msgs.append(q[k][1])
+                del q[:k + 1]
+            for used, s in zip(self._used, stamps):
+                used.append(s)
+            self._last = max(stamps)
+            self.stats.matched += 1
+            out.append((stamps[0], msgs))
         return out
+
+    def _closest(self, index: int, stamp: int) -> int | None:
+        """The position in input ``index``'s queue of the message nearest ``stamp``, or None
+        while a nearer one can still arrive: the input has nothing at or after ``stamp`` yet,
+        and its next message, at least half its usual interval after its last, could be
+        nearer."""
+        q = self._queues[index]
+        keys = [s for s, _ in q]
+        pos = bisect.bisect_left(keys, stamp)
+        if pos < len(q):
+            if pos == 0 or q[pos][0] - stamp < stamp - q[pos - 1][0]:
+                return pos
+            return pos - 1
+        gap = stamp - keys[-1]
+        if gap == 0:
+            return pos - 1
+        steps = self._steps[index]
+        soonest = keys[-1] + (_median(steps) / 2 if len(steps) >= 2 else 0)
+        return pos - 1 if soonest - stamp >= gap else None
