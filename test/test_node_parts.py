@@ -772,13 +772,35 @@ def test_save_calibration_says_where_and_what_or_why_not(tmp_path, monkeypatch):
 # ----- the intrinsics every CameraInfo carries
 
 
-def _cam_in(w=640, h=480, cx=0.0, cy=0.0, model="", d=(), r=(1, 0, 0, 0, 1, 0, 0, 0, 1)):
-    from sensor_msgs.msg import CameraInfo
+def _cam_in(w=640, h=480, cx=0.0, cy=0.0, model="", d=(), r=(1, 0, 0, 0, 1, 0, 0, 0, 1),
+            binning=(0, 0), roi=None):
+    from sensor_msgs.msg import CameraInfo, RegionOfInterest
 
     msg = CameraInfo(width=w, height=h, distortion_model=model, d=list(d))
     msg.k[2], msg.k[5] = cx, cy
     msg.r = [float(v) for v in r]
+    msg.binning_x, msg.binning_y = binning
+    if roi is not None:
+        msg.roi = RegionOfInterest(x_offset=roi[0], y_offset=roi[1], width=roi[2], height=roi[3])
     return msg
+
+
+def test_camera_info_in_binning_and_roi_describe_smaller_images():
+    """REP-104: width, height, K and P are the full sensor's; the images are the ROI, binned. A
+    driver binning 2x2 a 1280x960 sensor sends 640x480 images whose principal point is half of
+    K's; one cropping a 640x480 ROI at (320, 240) moves it by the offset (image_geometry's
+    arithmetic). Before 25 Nov 2026 both had every frame dropped as another size."""
+    from fcop_ros.ros.intrinsics import IntrinsicsRefused, intrinsics
+
+    p = {"principal_point_x": -1.0, "principal_point_y": -1.0}
+    binned = intrinsics(p, _cam_in(1280, 960, cx=639.0, cy=479.0, binning=(2, 2)), 640, 480)
+    assert (binned.cx, binned.cy, binned.assumed) == (319.5, 239.5, (False, False))
+    crop = _cam_in(1280, 960, cx=639.0, cy=479.0, roi=(320, 240, 640, 480))
+    assert (intrinsics(p, crop, 640, 480).cx, intrinsics(p, crop, 640, 480).cy) == (319.0, 239.0)
+    both = _cam_in(1280, 960, cx=639.0, cy=479.0, binning=(2, 2), roi=(320, 240, 640, 480))
+    assert (intrinsics(p, both, 320, 240).cx, intrinsics(p, both, 320, 240).cy) == (159.5, 119.5)
+    with pytest.raises(IntrinsicsRefused, match="images 320x240 after its ROI and binning"):
+        intrinsics(p, both, 640, 480)
 
 
 def test_principal_point_per_axis_from_parameter_then_camera_info_in_then_centre():
@@ -801,6 +823,8 @@ def test_principal_point_per_axis_from_parameter_then_camera_info_in_then_centre
     ({"principal_point_x": 700.0, "principal_point_y": -1.0}, None, "principal_point_outside"),
     ({"principal_point_x": -1.0, "principal_point_y": -1.0}, _cam_in(320, 240),
      "camera_info_size_mismatch"),
+    ({"principal_point_x": -1.0, "principal_point_y": -1.0}, _cam_in(1280, 960, binning=(2, 1)),
+     "camera_info_binning_unequal"),
 ])
 def test_intrinsics_refused_name_their_drop_counter(params, cam, reason):
     from fcop_ros.ros.intrinsics import IntrinsicsRefused, intrinsics

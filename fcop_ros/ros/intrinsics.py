@@ -39,16 +39,33 @@ class Intrinsics:
     assumed: tuple = (False, False)
 
 
+def image_window(cam: CameraInfo) -> tuple[int, int, int, int, int, int]:
+    """REP-104: the images camera_info_in describes are its ROI of the full-resolution sensor
+    (all of it when the ROI is unset), binned ``binning_x`` x ``binning_y`` (0 means 1). Returns
+    (x_offset, y_offset, binning_x, binning_y, width, height) of those images."""
+    bx, by = max(1, int(cam.binning_x)), max(1, int(cam.binning_y))
+    roi = cam.roi
+    if roi.width and roi.height:
+        x0, y0, w, h = int(roi.x_offset), int(roi.y_offset), int(roi.width), int(roi.height)
+    else:
+        x0, y0, w, h = 0, 0, int(cam.width), int(cam.height)
+    return x0, y0, bx, by, w // bx, h // by
+
+
 def _principal_point_in(cam: CameraInfo | None):
-    """camera_info_in's principal point of the rectified images: P's when P is set, else K's
-    (a driver that fills only K), else None."""
+    """camera_info_in's principal point in the images' pixels: P's when P is set, else K's (a
+    driver that fills only K), else None; moved by the ROI's offset and divided by the binning
+    as image_geometry does (K and P are given at full resolution)."""
     if cam is None:
         return None
     if cam.p[0] != 0 and (cam.p[2] != 0 or cam.p[6] != 0):
-        return float(cam.p[2]), float(cam.p[6])
-    if cam.k[2] != 0 or cam.k[5] != 0:
-        return float(cam.k[2]), float(cam.k[5])
-    return None
+        cx, cy = float(cam.p[2]), float(cam.p[6])
+    elif cam.k[2] != 0 or cam.k[5] != 0:
+        cx, cy = float(cam.k[2]), float(cam.k[5])
+    else:
+        return None
+    x0, y0, bx, by, _, _ = image_window(cam)
+    return (cx - x0) / bx, (cy - y0) / by
 
 
 def raw_camera(cam: CameraInfo) -> str:
@@ -65,14 +82,25 @@ def raw_camera(cam: CameraInfo) -> str:
 def intrinsics(params: dict, camera_info_in: CameraInfo | None, width: int,
                height: int) -> Intrinsics:
     """The intrinsics of a ``width`` x ``height`` image, or IntrinsicsRefused when
-    camera_info_in is of another size or the principal point lies off the image."""
+    camera_info_in describes images of another size or of unequal binning (pixels not square,
+    which fx = fy cannot describe), or the principal point lies off the image."""
     cam = camera_info_in
-    if cam is not None and cam.width and cam.height and (cam.width, cam.height) != (width,
-                                                                                     height):
-        raise IntrinsicsRefused(
-            "camera_info_size_mismatch",
-            f"camera_info_in is {cam.width}x{cam.height}, the images are {width}x{height}",
-        )
+    if cam is not None and cam.width and cam.height:
+        _, _, bx, by, w, h = image_window(cam)
+        if bx != by:
+            raise IntrinsicsRefused(
+                "camera_info_binning_unequal",
+                f"camera_info_in bins {bx}x{by}: the {width}x{height} images' pixels are not "
+                "square, and fCOP estimates one focal length for both axes",
+            )
+        if (w, h) != (width, height):
+            said = f"{cam.width}x{cam.height}"
+            if (w, h) != (cam.width, cam.height):
+                said += f" (images {w}x{h} after its ROI and binning)"
+            raise IntrinsicsRefused(
+                "camera_info_size_mismatch",
+                f"camera_info_in is {said}, the images are {width}x{height}",
+            )
     given = _principal_point_in(cam)
     fallback = given or image_centre(width, height)
     names = ("principal_point_x", "principal_point_y")
