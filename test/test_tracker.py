@@ -49,6 +49,20 @@ def test_another_size_starts_a_new_window_only_with_a_focal_of_its_own():
     assert t.add(empty((640, 480)), 5).kept_size is None and t.size == (640, 480)
 
 
+def test_a_window_without_evidence_takes_the_next_size_too():
+    """A first frame without evidence (a 1x1 test image, a camera still starting) held the
+    window's size: every frame of the real size without evidence was then dropped as
+    other_size_no_evidence, which says a window was kept that held nothing (until 25 Nov 2026).
+    A window without a focal keeps no size against another."""
+    t = tracker()
+    t.add(empty((1, 1)), 0)
+    step = t.add(empty((640, 480)), 1)
+    assert step.kept_size is None and step.resized_from == (1, 1) and t.size == (640, 480)
+    assert len(t) == 1
+    t.add(estimate(600.0), 2)
+    assert t.add(empty((320, 240)), 3).kept_size == (640, 480)
+
+
 def test_new_window_settings_re_evaluate_the_kept_frames():
     """Five frames at 600 px, the window shrunk to 2 and grown to 5 again: it gets all five
     back; settings that reach only the gate keep the window as it is."""

@@ -153,6 +153,11 @@ class FocalWindow:
     def __len__(self) -> int:
         return len(self._frames)
 
+    @property
+    def rated(self) -> int:
+        """Frames in the window with a focal length (the others are kept only as frames)."""
+        return sum(f.logf is not None for f in self._frames)
+
     def reset(self) -> None:
         """Forget every frame (e.g. after a known lens change or a looped bag)."""
         self._frames.clear()
@@ -184,7 +189,7 @@ class FocalWindow:
         if estimate.focal is not None and not (np.isfinite(estimate.focal) and estimate.focal > 0):
             raise ValueError(f"the estimate's focal must be finite and > 0, or None; got "
                              f"{estimate.focal!r}")
-        if new_size and estimate.focal is None:
+        if new_size and estimate.focal is None and self.rated:
             return replace(self.current, changed=False)
         if new_size:
             self._frames.clear()

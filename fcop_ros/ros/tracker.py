@@ -49,7 +49,8 @@ class FocalTracker:
     """A FocalWindow with what the node adds around it.
 
     - The window holds frames of one image size: a frame of another size starts a new window if
-      it has a focal of its own, and is dropped otherwise (an empty window takes any size).
+      it has a focal of its own, and is dropped otherwise (a window without a focal takes any
+      size).
     - The frames since the window's last restart are kept (light), as many as the largest
       ``max_frames`` so far, so that new window settings re-evaluate them and a window shrunk
       and grown again gets its frames back.
@@ -95,7 +96,7 @@ class FocalTracker:
         size = tuple(est.image_size)
         resized = None
         if self.size != size:
-            if est.focal is None and self.size is not None and len(self.window):
+            if est.focal is None and self.size is not None and self.window.rated:
                 return TrackStep(None, self.publishable, kept_size=self.size)
             resized, self.size = self.size, size
             if resized is not None:
