@@ -246,7 +246,32 @@ def test_approximate_waits_for_a_closer_partner_only_while_one_can_come():
         base = k * 33 * MS
         sets = run(jitter, [(0, base + MS), (1, base - MS), (2, base + 2 * MS)])
     # Once the rate is known, each set goes out with its last message: the depth input's next
-    # image is at least half a frame interval away, farther than its 1 ms from the set.
+    # image is at least its shortest interval away, farther than its 1 ms from the set.
     assert [[m[1] for m in s] for s in sets] == [[(5 * 33 + 1) * MS, (5 * 33 - 1) * MS,
                                                   (5 * 33 + 2) * MS]]
     assert jitter.stats.matched == 5 and jitter.pending() == 0
+
+
+def test_approximate_with_an_input_offset_by_a_quarter_frame_waits_for_nothing():
+    """The mask stamped 9 ms after depth and NOCS at 30 Hz, slop 20 ms: once the rates are known
+    (two intervals, from the fourth frame on), every set goes out with its frame's last
+    message, and the stream's last frame too (with the next depth image at least its shortest
+    interval away, 24 ms from the mask, nothing nearer can come). Waiting for half an interval
+    held every set back by a frame and the last for good (a hostile user's test, 25 Nov 2026)."""
+    sync = StampSynchronizer(3, queue_size=5, slop=0.020)
+    late = []
+    for k in range(10):
+        base = 1000 * MS + k * 33_333_333
+        out = run(sync, [(0, base), (1, base), (2, base + 9 * MS)])
+        late.append(len(out) != 1 or out[0][0][1] != base)
+    assert late == [True] * 3 + [False] * 7 and sync.stats.matched == 10
+    assert sync.pending() == 0 and sync.stats.dropped_total == 0
+
+
+def test_approximate_with_a_queue_of_one_does_not_wait_for_what_would_push_its_message_out():
+    """With queue_size 1 the next message of an input replaces the one a set waits for: the set
+    takes the one at hand (before 25 Nov 2026, 0 of these 4 frames matched)."""
+    sync = StampSynchronizer(3, queue_size=1, slop=0.020)
+    sets = run(sync, [(i, s) for k in range(4) for i, s in
+                      ((0, k * 33_333_333), (1, k * 33_333_333), (2, k * 33_333_333 + 9 * MS))])
+    assert [s[0][1] for s in sets] == [k * 33_333_333 for k in range(4)]

@@ -5,11 +5,17 @@ Policy. Each input keeps a queue sorted by stamp (bounded: the oldest is dropped
 messages is the pivot: every later set holds a message at or after it, so a message more than
 ``slop`` before it can never be matched and is dropped. Otherwise each input offers its message
 nearest the pivot, and the set goes out once no nearer one can still arrive: the input has a
-message at or after the pivot, or its next one, at least half its usual interval after its
+message at or after the pivot, or its next one, at least its shortest recent interval after its
 last, would be farther (like message_filters' ApproximateTime, which also waits; its Python
 version pairs with the nearest message already queued, right or not). Exact matching (slop 0)
 needs equal stamps. So each message is used at most once, sets come out in increasing stamp
-order, a set holds the nearest stamps, and nothing waits longer than the slowest input.
+order, a set holds each input's stamp nearest the pivot, and nothing waits longer than the
+slowest input. Each input is taken to arrive in stamp order. Stamps that are the same frame's
+but lie apart by more than half the interval between frames (independent jitter of more than a
+quarter of it, a constant offset of more than half) pair with the neighbouring frame, which is
+nearer, as with any rule that goes by nearness; the rule before 25 Nov 2026 (the oldest message
+of each input within the slop) paired those right while no message was lost, and wrongly a NOCS
+network that answers only some depth images, which this rule pairs right.
 
 Outlier stamps. Before a message reaches its queue, its stamp is compared with the input's
 previous accepted stamp: a stamp more than ``reset_after`` seconds back, or further ahead than
@@ -210,7 +216,6 @@ class StampSynchronizer:
                 self.accepted.append((index, stamp_ns, msg))
                 return []
         q = self._queues[index]
-        q = self._queues[index]
         keys = [s for s, _ in q]
         pos = bisect.bisect_left(keys, stamp_ns)
         if pos < len(q) and q[pos][0] == stamp_ns:
@@ -260,8 +265,8 @@ class StampSynchronizer:
     def _closest(self, index: int, stamp: int) -> int | None:
         """The position in input ``index``'s queue of the message nearest ``stamp``, or None
         while a nearer one can still arrive: the input has nothing at or after ``stamp`` yet,
-        and its next message, at least half its usual interval after its last, could be
-        nearer."""
+        its next message, at least its shortest recent interval after its last, could be
+        nearer, and that message would not push the one at hand out of a full queue."""
         q = self._queues[index]
         keys = [s for s, _ in q]
         pos = bisect.bisect_left(keys, stamp)
@@ -272,6 +277,8 @@ class StampSynchronizer:
         gap = stamp - keys[-1]
         if gap == 0:
             return pos - 1
+        if len(q) >= self.queue_size and pos == 1:
+            return 0
         steps = self._steps[index]
-        soonest = keys[-1] + (_median(steps) / 2 if len(steps) >= 2 else 0)
+        soonest = keys[-1] + (min(steps) if len(steps) >= 2 else 0)
         return pos - 1 if soonest - stamp >= gap else None
