@@ -83,12 +83,12 @@ class FocalEstimate:
     std_rel is within ``pose_max_std`` (those that can be posed), the input of the pose stage:
     ``estimate_poses(est.instances, focal, exclude=est.mirrored)`` at any focal length, e.g. a
     window's. object_extents: {instance_id: image scale x median depth (px m per NOCS unit)}
-    of all the combined objects, except those the image's edge cuts, where the image scale is
-    the object's RMS image radius over the RMS radius of its NOCS: the focal length times the
-    object's size (metres per NOCS unit), whatever part of it is in view. A zoom scales it;
-    moving the camera or the object does not (the depth makes up for the image size), nor does
-    an occlusion (pixels and NOCS go together), so the window tells a zoom from frames whose
-    errors moved by it. object_radii: the same objects' image scale alone (px per NOCS unit),
+    of all the combined objects, where the image scale is the object's RMS image radius over
+    the RMS radius of its NOCS: the focal length times the object's size (metres per NOCS
+    unit), whatever part of it is in view. A zoom scales it; moving the camera or the object
+    does not (the depth makes up for the image size), nor does an occlusion or the image's
+    edge (pixels and NOCS go together), so the window tells a zoom from frames whose errors
+    moved by it. object_radii: the same objects' image scale alone (px per NOCS unit),
     which a depth network's frame-to-frame change of scale does
     not move. image_size: (width, height), as in CameraInfo (numpy's shape is (height, width)).
     std_rel and std_rel_noise are None where the estimate has no per-object fit to draw them
@@ -893,7 +893,6 @@ def _finish(
     sizes = {
         inst.instance_id: _image_scale_depth(inst)
         for inst in (instances if measured is None else measured)
-        if not inst.at_border
     }
     est.object_extents = {i: r * d for i, (r, d) in sizes.items()}
     est.object_radii = {i: r for i, (r, _) in sizes.items()}

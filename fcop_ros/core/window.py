@@ -49,13 +49,15 @@ standard errors apart (instance ids that do not follow the objects make it scatt
 the focal lengths stands if a scale that can judge it moved the same way by more than half as
 much, or if none can judge it. A step in an image scale (the same test, without a floor) that
 the focal lengths follow by more than half, and that the newest frame keeps (by more than half:
-a zoom persists, masks grown by a pixel for two frames do not), is a zoom at once. The split
+a zoom persists, masks grown by a pixel for two frames do not), is a zoom at once. Frames
+follow only where their step's standard error (at least their own noise) is below the scale's
+step: frames that say they err by 77-26000% follow nothing. The split
 then moves, by at most ``change_frames`` of that scale's frames, to where the fewest frames lie
 on the side whose image scale they are further from (of the scale that tells the zoom best).
-Frames without any of the window's objects' sizes (hand-built estimates, or all objects cut by
-the image's edge) are skipped in a scale: it judges a split with ``change_frames`` frames of
-its own after it and at least one before it (frames that were cut by the edge leave no more;
-its standard error counts how few), and a split it finds starts at its first newer frame with
+Frames without any of the window's objects' sizes (hand-built estimates, or objects that left
+the view) are skipped in a scale: it judges a split with ``change_frames`` frames of its own
+after it and at least one before it (frames without sizes leave no more; its standard error
+counts how few), and a split it finds starts at its first newer frame with
 sizes (newer frames without sizes before it go with the older frames).
 
 Where the zoom is measured, the older frames are kept instead, at the new focal length. The
@@ -283,7 +285,7 @@ class FocalWindow:
         def judged(at, c):
             # The scale's split for the frames' split c, where change_frames frames with a
             # scale lie after it and one at least before it (frames without one, e.g. all
-            # objects cut by the image's edge, are skipped; older ones never come back, and
+            # objects out of view, are skipped; older ones never come back, and
             # the standard error counts how few there are).
             cs = int(np.searchsorted(at, c))
             return cs if 1 <= cs <= at.size - k else None
@@ -319,6 +321,7 @@ class FocalWindow:
                 cs, moved, z = _step(scale, k, None)
                 c = int(at[cs])
                 if (z > sigma and abs(moved) > least and _agrees(_difference(y, c), moved)
+                        and _standard_error(y, c, floor) < abs(moved)
                         and _agrees(scale[-1] - np.median(scale[:cs]), moved)):
                     hit = c
                     break
