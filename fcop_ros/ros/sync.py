@@ -236,18 +236,14 @@ class StampSynchronizer:
             if hi - min(heads) > self.slop_ns:
                 # Every later set holds a message at or after ``hi`` (the oldest of its input):
                 # a head more than the slop before it can never be matched.
-                i = heads.index(min(heads))
-                self._queues[i].pop(0)
-                self.stats.drop("unmatched", i)
+                self._drop_oldest_head(heads)
                 continue
             picks = [self._closest(i, hi) for i in range(self.n)]
             if any(p is None for p in picks):
                 break  # a closer partner may still come
             stamps = [q[k][0] for q, k in zip(self._queues, picks)]
             if max(stamps) - min(stamps) > self.slop_ns:
-                i = heads.index(min(heads))
-                self._queues[i].pop(0)
-                self.stats.drop("unmatched", i)
+                self._drop_oldest_head(heads)
                 continue
             msgs = []
             for i, (q, k) in enumerate(zip(self._queues, picks)):
@@ -261,6 +257,12 @@ class StampSynchronizer:
             self.stats.matched += 1
             out.append((stamps[0], msgs))
         return out
+
+    def _drop_oldest_head(self, heads: list[int]) -> None:
+        """Drop, as unmatched, the oldest of the queues' oldest messages (stamps ``heads``)."""
+        i = heads.index(min(heads))
+        self._queues[i].pop(0)
+        self.stats.drop("unmatched", i)
 
     def _closest(self, index: int, stamp: int) -> int | None:
         """The position in input ``index``'s queue of the message nearest ``stamp``, or None
