@@ -910,10 +910,13 @@ def test_camera_info_output_answers_each_depth_stamp_once_and_the_owed_one_later
     out.answer_depth(4, depth, lambda: ready)
     out.answer_owed(2, "h", ready)  # older than a stamp answered since: never out of order
     assert [s.width for s in sent] == [640, 640] and out.latest.objects == ("pose",)
+    # A depth image arriving after a newer one is answered on arrival, as a driver's would be.
+    out.answer_depth(3, depth, lambda: ready)
+    assert len(sent) == 3 and out.latest.stamp_ns == 3
     out.clear()
     assert out.latest is None
     out.answer_depth(4, depth, lambda: ready)  # after a reset each stamp is answered anew
-    assert len(sent) == 3 and out.latest.objects == ()
+    assert len(sent) == 4 and out.latest.objects == ()
 
 
 def test_ledger_counts_frames_without_a_focal_since_the_window_was_emptied():
