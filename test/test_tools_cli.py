@@ -142,10 +142,15 @@ def test_make_bag_cli_compression_default_and_errors(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err
 
 
+_IN_RANGE = "must be a number of pixels in [1, 1e+06] (the node's focal range)"
+
+
 @pytest.mark.parametrize("args, said", [
-    (["--focal", "-5"], "focal must be a positive number of pixels, got -5.0"),
-    (["--focal", "0"], "focal must be a positive number of pixels, got 0.0"),
-    (["--focal", "nan"], "focal must be a positive number of pixels, got nan"),
+    (["--focal", "-5"], f"focal {_IN_RANGE}, got -5.0"),
+    (["--focal", "0"], f"focal {_IN_RANGE}, got 0.0"),
+    (["--focal", "nan"], f"focal {_IN_RANGE}, got nan"),
+    (["--focal", "1e-300"], f"focal {_IN_RANGE}, got 1e-300"),
+    (["--zoom-frame", "2", "--zoom-focal", "2e6"], f"zoom focal {_IN_RANGE}"),
     (["--rate", "0"], "--rate must be a positive number of frames per second, got 0.0"),
     (["--rate", "-3"], "--rate must be a positive number of frames per second, got -3.0"),
     # A hostile user's: every stamp the same, and stamps whose seconds wrap negative.
@@ -153,7 +158,7 @@ def test_make_bag_cli_compression_default_and_errors(tmp_path, capsys):
     (["--rate", "1e-9"], "beyond 2038"),
     (["--rate", "1e-300"], "beyond 2038"),  # 1e9 / rate is inf: an OverflowError before
     (["--zoom-frame", "10", "--zoom-focal", "700"], "the zoom frame 10 is not one of the 4"),
-    (["--zoom-frame", "2", "--zoom-focal", "-1"], "zoom focal must be a positive number"),
+    (["--zoom-frame", "2", "--zoom-focal", "-1"], f"zoom focal {_IN_RANGE}"),
     (["--objects", "0"], "need at least one frame, one object"),
 ])
 def test_make_bag_refuses_what_it_cannot_render_in_one_line(tmp_path, capsys, args, said):
@@ -166,7 +171,7 @@ def test_make_bag_refuses_what_it_cannot_render_in_one_line(tmp_path, capsys, ar
 
 
 @pytest.mark.parametrize("args, said", [
-    (["--focal", "0"], "focal must be a positive number of pixels, got 0.0"),
+    (["--focal", "0"], f"focal {_IN_RANGE}, got 0.0"),
     (["--frames", "0"], "need at least one frame"),
     (["--out", "FILE"], "exists and is not a directory"),
 ])
@@ -446,3 +451,10 @@ def test_sigint_while_play_publishes_ends_as_interrupted(tmp_path):
     assert len(got) >= 2, err
     assert proc.returncode == 130, err
     assert "interrupted" in err and "Traceback" not in err, err
+
+
+def test_the_synthetic_focal_limits_are_the_nodes_focal_range():
+    from fcop_ros.ros.params import PARAMETERS
+    from fcop_ros.synthetic.sequence import FOCAL_LIMITS
+
+    assert PARAMETERS["focal_min"].range == PARAMETERS["focal_max"].range == FOCAL_LIMITS

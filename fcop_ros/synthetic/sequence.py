@@ -11,6 +11,11 @@ from .noise import PRESETS, apply_noise
 from .render import Frame, SceneObject, random_scene, render
 
 
+#: The focal lengths a sequence may have, pixels: the range of the node's focal_min and
+#: focal_max (below 1 px the renderer overflows; no node could estimate it).
+FOCAL_LIMITS = (1.0, 1e6)
+
+
 @dataclass
 class SequenceSpec:
     """What a sequence shows: frames, size, focal (px), zoom, noise preset, objects and orbit
@@ -31,9 +36,10 @@ class SequenceSpec:
             raise ValueError("need at least one frame, one object and an image of 8x8 or more")
         for name in ("focal", "zoom_focal"):
             v = getattr(self, name)
-            if v is not None and not (np.isfinite(v) and v > 0):
-                raise ValueError(f"{name.replace('_', ' ')} must be a positive number of "
-                                 f"pixels, got {v}")
+            if v is not None and not (np.isfinite(v) and FOCAL_LIMITS[0] <= v <= FOCAL_LIMITS[1]):
+                raise ValueError(f"{name.replace('_', ' ')} must be a number of pixels in "
+                                 f"[{FOCAL_LIMITS[0]:g}, {FOCAL_LIMITS[1]:g}] (the node's "
+                                 f"focal range), got {v}")
         if (self.zoom_frame is None) != (self.zoom_focal is None):
             raise ValueError("a zoom needs both its frame and its focal length")
         if self.zoom_frame is not None and not 0 <= self.zoom_frame < self.frames:
