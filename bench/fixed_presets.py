@@ -5,6 +5,7 @@ distance) of each preset, with the test's own error function.
 
     python bench/fixed_presets.py
 """
+import argparse
 import os
 import sys
 import time
@@ -15,6 +16,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def main():
+    argparse.ArgumentParser(description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     sys.path.insert(0, os.path.join(ROOT, "test"))
     from test_estimator import _errors
 

@@ -7,8 +7,8 @@ s ~ U[0.2,1], t in a ball of radius 2 m about (0,0,4)); histogram of log10 relat
 and of the Umeyama pose errors at the solved focal (rotation in degrees, translation and scale
 in %) on 1e4 objects of 50 points. Noise: per trial an object of 100 points with bounded
 uniform depth noise (metres) and/or NOCS noise (NOCS units), 300 random triplets, interval
-stabbing (relative bound 1%); median focal error over 500 trials per level. Writes PNGs and a
-markdown table to --out.
+stabbing (relative bound 1%); median focal error over 500 trials per level. Writes its two PNGs to
+--out and prints a markdown table.
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Calibrate the world's presets against the paper's REAL275 figures, with the paper's method.
 
-    python bench/world_calibration.py [--frames 80] [--gains 0.4 0.5 0.6]
+    python bench/world_calibration.py [--frames 80] [--gains 0.5 0.6 0.7 0.8 0.9 1.0]
 
 For each named preset and each gain (a factor on every continuous error strength of the preset's
 bounds), the median |focal error| of the paper's fCOP-IS taken literally (5 px bound, interval
