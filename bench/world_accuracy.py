@@ -484,7 +484,7 @@ def zoom(presets, zoom_sequences, first_seed, variant):
 
 
 def main() -> None:
-    global OPTIONS, OBJECTS, ORBIT_DEG, GIVEN_PP
+    global OPTIONS, OBJECTS, ORBIT_DEG, GIVEN_PP, RENEW
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=HelpFormatter)
     ap.add_argument(
