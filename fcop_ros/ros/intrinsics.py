@@ -52,10 +52,11 @@ def image_window(cam: CameraInfo) -> tuple[int, int, int, int, int, int]:
     return x0, y0, bx, by, w // bx, h // by
 
 
-def _principal_point_in(cam: CameraInfo | None):
+def _principal_point_in(cam: CameraInfo | None, window):
     """camera_info_in's principal point in the images' pixels: P's when P is set, else K's (a
     driver that fills only K), else None; moved by the ROI's offset and divided by the binning
-    as image_geometry does (K and P are given at full resolution)."""
+    as image_geometry does (K and P are given at full resolution). ``window``:
+    ``image_window(cam)``."""
     if cam is None:
         return None
     if cam.p[0] != 0 and (cam.p[2] != 0 or cam.p[6] != 0):
@@ -64,7 +65,7 @@ def _principal_point_in(cam: CameraInfo | None):
         cx, cy = float(cam.k[2]), float(cam.k[5])
     else:
         return None
-    x0, y0, bx, by, _, _ = image_window(cam)
+    x0, y0, bx, by, _, _ = window
     return (cx - x0) / bx, (cy - y0) / by
 
 
@@ -85,8 +86,9 @@ def intrinsics(params: dict, camera_info_in: CameraInfo | None, width: int,
     camera_info_in describes images of another size or of unequal binning (pixels not square,
     which fx = fy cannot describe), or the principal point lies off the image."""
     cam = camera_info_in
+    window = image_window(cam) if cam is not None else None
     if cam is not None and cam.width and cam.height:
-        _, _, bx, by, w, h = image_window(cam)
+        _, _, bx, by, w, h = window
         if bx != by:
             raise IntrinsicsRefused(
                 "camera_info_binning_unequal",
@@ -101,7 +103,7 @@ def intrinsics(params: dict, camera_info_in: CameraInfo | None, width: int,
                 "camera_info_size_mismatch",
                 f"camera_info_in is {said}, the images are {width}x{height}",
             )
-    given = _principal_point_in(cam)
+    given = _principal_point_in(cam, window)
     fallback = given or image_centre(width, height)
     names = ("principal_point_x", "principal_point_y")
     assumed = tuple(given is None and params[name] < 0 for name in names)
