@@ -16,6 +16,9 @@ from .stabbing import focal_intervals
 
 BOUND_MODES = ("relative", "absolute")
 MAX_RELATIVE_BOUND = 0.5  # a relative noise bound is a fraction of f up to this
+#: The focal lengths, pixels, a setting may name: the node's focal_min and focal_max, and the
+#: synthetic sequences' focal (below 1 px their renderer overflows).
+FOCAL_LIMITS = (1.0, 1e6)
 # An erosion by a 3x3 square k times removes every object narrower than 2k + 1 pixels: beyond
 # half the largest image side the package takes (8192, make_bag's) it removes every object, and
 # its cost grows with k.

@@ -18,6 +18,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 
 from ..core.options import (
     BOUND_MODES,
+    FOCAL_LIMITS,
     MAX_RELATIVE_BOUND,
     EstimatorOptions,
     NoiseBound,
@@ -74,10 +75,10 @@ PARAMETERS: dict[str, ParamSpec] = {
         choices=BOUND_MODES,
     ),
     "focal_min": ParamSpec(
-        _EST.focal_range[0], "Smallest focal length considered, pixels.", range=(1.0, 1e6)
+        _EST.focal_range[0], "Smallest focal length considered, pixels.", range=FOCAL_LIMITS
     ),
     "focal_max": ParamSpec(
-        _EST.focal_range[1], "Largest focal length considered, pixels.", range=(1.0, 1e6)
+        _EST.focal_range[1], "Largest focal length considered, pixels.", range=FOCAL_LIMITS
     ),
     "min_object_pixels": ParamSpec(
         _EST.min_object_pixels,

@@ -7,13 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..core.options import FOCAL_LIMITS
 from .noise import PRESETS, apply_noise
 from .render import Frame, SceneObject, random_scene, render
-
-
-#: The focal lengths a sequence may have, pixels: the range of the node's focal_min and
-#: focal_max (below 1 px the renderer overflows; no node could estimate it).
-FOCAL_LIMITS = (1.0, 1e6)
 
 
 @dataclass
