@@ -174,15 +174,18 @@ def test_make_bag_refuses_what_it_cannot_render_in_one_line(tmp_path, capsys, ar
     (["--focal", "0"], f"focal {_IN_RANGE}, got 0.0"),
     (["--frames", "0"], "need at least one frame"),
     (["--out", "FILE"], "exists and is not a directory"),
+    (["--out", ""], "--out is empty"),
 ])
-def test_demo_refuses_unusable_arguments_in_one_line(tmp_path, capsys, args, said):
+def test_demo_refuses_unusable_arguments_in_one_line(tmp_path, capsys, monkeypatch, args, said):
+    """Exit 2 and one line, nothing written (an empty --out wrote into the current directory)."""
+    monkeypatch.chdir(tmp_path)
     (tmp_path / "FILE").write_text("")
     args = [str(tmp_path / "FILE") if a == "FILE" else a for a in args]
     out = [] if "--out" in args else ["--out", str(tmp_path / "demo")]
     assert demo.main(out + args) == 2
     err = capsys.readouterr().err
     assert err.startswith("fcop_demo: ") and said in err and err.count("\n") == 1
-    assert not (tmp_path / "demo").exists()
+    assert not (tmp_path / "demo").exists() and not (tmp_path / "input_bag").exists()
 
 
 def test_replay_says_which_options_its_mode_ignores(tmp_path, capsys):

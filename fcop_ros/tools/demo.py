@@ -36,13 +36,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     from .bagio import BagError, not_a_bag_of, remove_bag
-    from .replay_base import ReplayError
+    from .replay_base import ReplayError, check_out_dir
 
     args = build_parser().parse_args(argv)
     out = Path(args.out)
     bag = out / "input_bag"
     zoom_frame = (2 * args.frames) // 3
     try:
+        check_out_dir(args.out)
         check_limits(args.seed, 640, 480, args.frames, SequenceSpec.objects)
         spec = SequenceSpec(args.frames, 640, 480, args.focal, zoom_frame, args.zoom_focal,
                             args.preset)
@@ -54,7 +55,7 @@ def main(argv=None) -> int:
                              "away or choose another --out")
         remove_bag(bag)
         out.mkdir(parents=True, exist_ok=True)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, ReplayError) as exc:
         print(f"fcop_demo: {exc}", file=sys.stderr)
         return 2
     print(f"1/2 writing a synthetic bag: {args.frames} frames 640x480 at 30 Hz, 5 objects, "

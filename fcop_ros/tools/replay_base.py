@@ -28,6 +28,13 @@ class OutputError(ReplayError):
     """An output that cannot be written (read-only, not a directory, disk full): exit 4."""
 
 
+def check_out_dir(out_dir) -> None:
+    """ReplayError for an empty --out: ``Path("")`` is the current directory, which a user who
+    left the option's value out did not choose."""
+    if not str(out_dir):
+        raise ReplayError("--out is empty: give the output directory ('.' for this one)")
+
+
 @contextmanager
 def writing(what):
     """Turn a failed write of an output into OutputError naming the output and the reason."""

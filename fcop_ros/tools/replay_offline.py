@@ -19,6 +19,7 @@ from .replay_base import (
     ReplaySummary,
     check_distinct,
     check_not_empty,
+    check_out_dir,
     check_topics,
     writing,
 )
@@ -149,8 +150,7 @@ def replay(
     --out is written), so a caller that sees Ctrl-C knows what was written."""
     summary = summary if summary is not None else ReplaySummary()
     params = node_parameters(params_file, overrides)
-    if not str(out_dir):
-        raise ReplayError("--out is empty: give the output directory ('.' for this one)")
+    check_out_dir(out_dir)
     inputs = {"depth": depth_topic, "nocs": nocs_topic, "mask": mask_topic}
     check_distinct(inputs)
     use_large_image_profile()
