@@ -156,7 +156,7 @@ def test_intake_names_the_silent_input_and_queue_size_when_a_queue_overflows():
     assert [st.dropped for st in steps] == [{}, {}, {"sync_queue_full": 1}]
     # Inputs that never sent are not told to raise queue_size (a trial's log said both).
     assert steps[2].log == (("warn", "sync_queue_full", (
-        "fcop_node: dropped 1 message(s) in the synchroniser: queue full (depth 1); nothing "
+        "dropped 1 message(s) in the synchroniser: queue full (depth 1); nothing "
         "received from nocs and mask yet (are they published, and the node's topics remapped "
         "to theirs?)")),)
     assert not any(st.sets or st.jumped for st in steps)
@@ -186,9 +186,9 @@ def test_intake_counts_an_outlier_stamp_per_input_and_says_where_the_clock_was()
     # Inputs of one rate: the depth and NOCS left without their mask are a lost frame, though
     # frames matched just before.
     assert _lines(steps, "warn") == {
-        "outlier_2": ("fcop_node: dropped 1 mask message(s) with an outlier stamp (0.000 s; the "
+        "outlier_2": ("dropped 1 mask message(s) with an outlier stamp (0.000 s; the "
                       "mask stamps before were at 10.033 s)"),
-        "sync_unmatched": ("fcop_node: dropped 2 message(s) in the synchroniser: unmatched "
+        "sync_unmatched": ("dropped 2 message(s) in the synchroniser: unmatched "
                            "(depth 1, nocs 1)")}
     assert not _lines(steps, "info")
     assert sum(len(st.sets) for st in steps) == 4 and not any(st.jumped for st in steps)
@@ -261,7 +261,7 @@ def test_intake_reports_a_jump_back_once_for_the_node_to_reset():
     steps = _steps(StampSynchronizer(3), messages)
     jumps = [n for n, st in enumerate(steps) if st.jumped]
     assert len(jumps) == 1 and steps[jumps[0]].log == (("warn", "time_jump",
-        "fcop_node: time jumped back (looped bag?): synchroniser and window reset"),)
+        "time jumped back (looped bag?): synchroniser and window reset"),)
     # The held depth messages that confirmed the jump are released with it, then matched.
     assert [m[1] for m in steps[jumps[0]].accepted] == [2 * SEC + k * FRAME_DT for k in range(3)]
     assert sum(len(st.sets) for st in steps) == 8

@@ -119,7 +119,7 @@ def test_frame_outcome_says_what_each_step_means_without_a_node():
     said = frame_outcome(stray, t.add(stray, 3))
     assert not said.kept and said.dropped == {"other_size_no_evidence": 1}
     assert said.log == (("warn", "other_size_no_evidence",
-                         "fcop_node: dropped a 320x240 frame without focal evidence (nothing); "
+                         "dropped a 320x240 frame without focal evidence (nothing); "
                          "the window keeps its 640x480 frames"),)
     small = estimate(300.0, size=(320, 240))
     said = frame_outcome(small, t.add(small, 4))
@@ -145,7 +145,7 @@ def test_frame_outcome_says_a_zoom_each_time_the_window_restarts():
         est = estimate(750.0)
         lines += [e for e in frame_outcome(est, t.add(est, k)).log if e[1] == "zoom"]
     assert len(lines) == 1 and lines[0][0] == "event", lines
-    assert lines[0][2].startswith("fcop_node: focal length changed (zoom?): window restarted")
+    assert lines[0][2].startswith("focal length changed (zoom?): window restarted")
 
 
 def test_frame_outcome_says_when_the_window_keeps_its_frames_through_a_zoom():
@@ -162,7 +162,7 @@ def test_frame_outcome_says_when_the_window_keeps_its_frames_through_a_zoom():
         est.object_extents = {i: r * 1.5 for i, r in est.object_radii.items()}
         lines += [e for e in frame_outcome(est, t.add(est, k)).log if e[1] == "zoom"]
     assert len(lines) == 1, lines
-    assert lines[0][2] == ("fcop_node: focal length changed (zoom?): x1.251 as the objects' "
+    assert lines[0][2] == ("focal length changed (zoom?): x1.251 as the objects' "
                            "image sizes show; the window keeps its 12 frames at the new focal, "
                            "now at 750.3 px")
     assert len(t.window) == 20 and abs(t.current.focal / 750.0 - 1) < 1e-3

@@ -30,7 +30,7 @@ def frame_outcome(est, step) -> FrameOutcome:
     if est.mirrored:
         warnings["mirrored_nocs"] += len(est.mirrored)
         log.append(("warn", "mirrored_nocs",
-                    f"fcop_node: the NOCS of instance(s) {est.mirrored} fit their shape only as a "
+                    f"the NOCS of instance(s) {est.mirrored} fit their shape only as a "
                     "mirror image: is the nocs image's channel order right (rgb8 vs bgr8), or its "
                     "axis convention (parameter nocs_convention)? The focal length is "
                     "unaffected; no pose is published for them"))
@@ -38,21 +38,21 @@ def frame_outcome(est, step) -> FrameOutcome:
         kw, kh = step.kept_size
         dropped["other_size_no_evidence"] += 1
         log.append(("warn", "other_size_no_evidence",
-                    f"fcop_node: dropped a {w}x{h} frame without focal evidence ({est.reason}); "
+                    f"dropped a {w}x{h} frame without focal evidence ({est.reason}); "
                     f"the window keeps its {kw}x{kh} frames"))
         return FrameOutcome(dropped, warnings, tuple(log), False)
     if est.focal is None:
         dropped["no_evidence"] += 1
         log.append(("warn", "no_evidence",
-                    f"fcop_node: frame without focal evidence: {est.reason}"))
+                    f"frame without focal evidence: {est.reason}"))
     if step.resized_from is not None:
         ow, oh = step.resized_from
-        log.append(("event", "resized", f"fcop_node: image size changed from {ow}x{oh} to "
+        log.append(("event", "resized", f"image size changed from {ow}x{oh} to "
                                         f"{w}x{h}: new focal window"))
     win = step.window_estimate
     if win.changed:
         at = "no focal yet" if win.focal is None else f"{win.focal:.1f} px"
-        log.append(("event", "zoom", "fcop_node: focal length changed (zoom?): " + (
+        log.append(("event", "zoom", "focal length changed (zoom?): " + (
             "window restarted" if win.zoom is None else
             f"x{win.zoom:.3f} as the objects' image sizes show; the window keeps its "
             f"{win.frames} frames at the new focal") + f", now at {at}"))

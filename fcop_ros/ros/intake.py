@@ -169,11 +169,11 @@ class Intake:
         for i, stamps, ref in sync.outliers_dropped:
             dropped[f"outlier_stamp_{inputs[i]}"] += len(stamps)
             log.append(("warn", f"outlier_{i}",
-                        f"fcop_node: dropped {len(stamps)} {inputs[i]} message(s) with an outlier "
+                        f"dropped {len(stamps)} {inputs[i]} message(s) with an outlier "
                         f"stamp ({', '.join(_sec(s) for s in stamps)}; the {inputs[i]} stamps "
                         f"before were at {_sec(ref)})"))
         if jumped:
-            log.append(("warn", "time_jump", "fcop_node: time jumped back (looped bag?): "
+            log.append(("warn", "time_jump", "time jumped back (looped bag?): "
                                              "synchroniser and window reset"))
         flowing = self._last_match is not None and now - self._last_match <= FLOWING_SECONDS
         slowest = min(self.received)
@@ -191,7 +191,7 @@ class Intake:
                 if reason not in self._said_flowing:
                     self._said_flowing.add(reason)
                     log.append(("info", "sync_flowing_" + reason, (
-                        f"fcop_node: {reason.replace('_', ' ')} messages ({which}) dropped in "
+                        f"{reason.replace('_', ' ')} messages ({which}) dropped in "
                         "the synchroniser while frames keep matching: expected where an input "
                         "comes at a lower rate than the others (e.g. a NOCS network slower than "
                         "the camera); counted in /diagnostics, said again only if no frame "
@@ -202,6 +202,6 @@ class Intake:
             if reason == "queue_full" and waiting:
                 hint = self._waiting_hint(waiting, now)
             log.append(("warn", "sync_" + reason,
-                        f"fcop_node: dropped {n} message(s) in the synchroniser: "
+                        f"dropped {n} message(s) in the synchroniser: "
                         f"{reason.replace('_', ' ')} ({which}){hint}"))
         return SyncStep(sets, list(sync.accepted), jumped, dropped, tuple(log))

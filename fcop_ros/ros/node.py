@@ -236,7 +236,7 @@ class FcopNode(Node):
         for name in sorted(node_parameters.given(self)):
             if not self.has_parameter(name):
                 self.get_logger().warning(
-                    f"fcop_node: parameter {name} is not one of this node's; ignored"
+                    f"parameter {name} is not one of this node's; ignored"
                     f"{self._unknown_parameter_hint(name)}"
                 )
 
@@ -253,7 +253,7 @@ class FcopNode(Node):
             if not self.has_parameter(prm.name):
                 self._throttle.warn(
                     "unknown_parameter",
-                    f"fcop_node: cannot set parameter {prm.name}: not one of this node's"
+                    f"cannot set parameter {prm.name}: not one of this node's"
                     f"{self._unknown_parameter_hint(prm.name)}")
         return node_parameters.as_requested(params)
 
@@ -319,7 +319,7 @@ class FcopNode(Node):
             self._reject("camera_info_in_not_finite")
             self._throttle.warn(
                 "camera_info_in_not_finite",
-                f"fcop_node: ignored a camera_info_in message: its {', '.join(bad)} hold NaN or "
+                f"ignored a camera_info_in message: its {', '.join(bad)} hold NaN or "
                 "inf values; the last good one, if any, stays in use")
             return
         with self._lock:
@@ -328,7 +328,7 @@ class FcopNode(Node):
         if raw and not self._warned_distortion:
             self._warned_distortion = True
             self.get_logger().warning(
-                f"fcop_node: camera_info_in describes a raw camera ({raw}): fCOP assumes a "
+                f"camera_info_in describes a raw camera ({raw}): fCOP assumes a "
                 "pinhole camera, so feed it rectified images; the output describes them, as "
                 "REP-104's P does (principal point from P, D zero, R the identity)"
             )
@@ -368,13 +368,13 @@ class FcopNode(Node):
             if k == 0:
                 self._throttle.warn(
                     "estimator_busy",
-                    "fcop_node: the estimator is slower than the input: skipped a frame (it "
+                    "the estimator is slower than the input: skipped a frame (it "
                     "works on the newest one)",
                 )
             else:  # replaced by its own batch, however fast the estimator is
                 self._throttle.info(
                     "sets_at_once",
-                    f"fcop_node: {len(sets)} frames matched at once (held messages released, "
+                    f"{len(sets)} frames matched at once (held messages released, "
                     "e.g. after a time jump); the estimator takes the newest",
                 )
 
@@ -390,7 +390,7 @@ class FcopNode(Node):
             self.ledger.warnings.update(reasons)
         self._throttle.warn(
             reasons[0],
-            "fcop_node: the inputs of one frame name different or empty frame_ids ("
+            "the inputs of one frame name different or empty frame_ids ("
             + ", ".join(f"{n} {i!r}" for n, i in zip(INPUTS, ids))
             + "): the outputs use the depth image's",
         )
@@ -416,7 +416,7 @@ class FcopNode(Node):
         log = rclpy.logging.get_logger(f"{self.get_logger().name}.kernels")  # not on rosout
         if compiled.ENABLED:
             log.info(
-                "fcop_node: preparing the estimator's kernels (the first run on a machine "
+                "preparing the estimator's kernels (the first run on a machine "
                 "compiles them, up to a minute; later runs load them from the cache)"
             )
         t0 = time.perf_counter()
@@ -426,13 +426,13 @@ class FcopNode(Node):
             compiled.ENABLED = False
             if self.context.ok():
                 log.warning(
-                    f"fcop_node: the compiled kernels failed to build ({exc!r}); estimating "
+                    f"the compiled kernels failed to build ({exc!r}); estimating "
                     "with numpy, several times slower"
                 )
         else:
             if compiled.ENABLED and self.context.ok():
                 log.info(
-                    f"fcop_node: estimator kernels ready ({compiled.describe()}, {seconds:.1f} s)"
+                    f"estimator kernels ready ({compiled.describe()}, {seconds:.1f} s)"
                 )
         finally:
             self.warm_up_seconds = time.perf_counter() - t0
@@ -447,11 +447,11 @@ class FcopNode(Node):
         why = f"failed: {type(exc).__name__}: {exc}"
         with self._lock:  # a frame without a focal, as one the estimator refused
             self.ledger.no_focal("exception", why)
-        self._throttle.warn("exception", f"fcop_node: frame {item[0]} {why}")
+        self._throttle.warn("exception", f"frame {item[0]} {why}")
         if not self._traceback_said:  # once: what a bug report needs
             self._traceback_said = True
             self.get_logger().warning(
-                "fcop_node: the first failed frame's traceback (please report it):\n"
+                "the first failed frame's traceback (please report it):\n"
                 + "".join(traceback.format_exception(exc)).rstrip())
 
     def _reject(self, reason: str, n: int = 1) -> None:
@@ -464,7 +464,7 @@ class FcopNode(Node):
         throttle, and keep it as the newest frame's reason; returns False."""
         with self._lock:
             self.ledger.no_focal(reason, f"dropped: {why}")
-        self._throttle.warn(reason, f"fcop_node: dropped frame: {why}")
+        self._throttle.warn(reason, f"dropped frame: {why}")
         return False
 
     def idle(self) -> bool:
@@ -571,7 +571,7 @@ class FcopNode(Node):
         response.success = True
         response.message = ("focal window, synchroniser, hand-off, latest_camera_info and "
                             "the latest estimate cleared")
-        self._throttle.info("reset", "fcop_node: reset by service")
+        self._throttle.info("reset", "reset by service")
         return response
 
     def calibration_path(self) -> str:
@@ -585,7 +585,7 @@ class FcopNode(Node):
         response.success = False
         if est is None:
             response.message = why or "no image yet"
-            self.get_logger().warning(f"fcop_node: calibration not saved: {response.message}")
+            self.get_logger().warning(f"calibration not saved: {response.message}")
             return response
         try:
             with self._lock:
@@ -597,7 +597,7 @@ class FcopNode(Node):
             info, est.std_rel, calibration_path(p["calibration_file"], p["camera_name"]),
             p["camera_name"])
         if not response.success:
-            self.get_logger().error(f"fcop_node: calibration not saved: {response.message}")
+            self.get_logger().error(f"calibration not saved: {response.message}")
             return response
         if self.set_info_client is not None:
             if self.set_info_client.service_is_ready():
@@ -608,7 +608,7 @@ class FcopNode(Node):
                                      "answer is logged, and a refusal counted in /diagnostics)")
             else:
                 response.message += f"; {self.set_info_client.srv_name} is not available"
-        self.get_logger().info(f"fcop_node: {response.message}")
+        self.get_logger().info(f"{response.message}")
         return response
 
     def _on_set_camera_info_done(self, future) -> None:
@@ -617,12 +617,12 @@ class FcopNode(Node):
             with self._lock:
                 self.ledger.warnings["set_camera_info_refused"] += 1
             self.get_logger().error(
-                f"fcop_node: {self.set_info_client.srv_name} refused the calibration: "
+                f"{self.set_info_client.srv_name} refused the calibration: "
                 f"{getattr(res, 'status_message', 'no answer')}"
             )
         else:
             self.get_logger().info(
-                f"fcop_node: {self.set_info_client.srv_name} took the calibration"
+                f"{self.set_info_client.srv_name} took the calibration"
             )
 
     # ----- diagnostics
@@ -694,11 +694,11 @@ class FcopNode(Node):
             return
         level, text = news
         if level == DiagnosticStatus.OK:
-            self.get_logger().info(f"fcop_node: {text}")
+            self.get_logger().info(f"{text}")
         elif level == DiagnosticStatus.ERROR:
-            self.get_logger().error(f"fcop_node: {text}")
+            self.get_logger().error(f"{text}")
         else:
-            self._throttle.warn("health", f"fcop_node: {text}")
+            self._throttle.warn("health", f"{text}")
 
     def destroy_node(self):
         if self.worker is not None:
