@@ -376,7 +376,9 @@ def tau(presets, frames, first_seed, variant):
               f"{100 * np.sqrt(np.median(t2)):.2f} | {100 * np.mean(t2 > 0):.0f}% |", flush=True)
 
 
-def run_sequence(preset, seed, n, variant, zoom=1.0):
+def run_sequence(preset, seed, n, variant, zoom=1.0, estimates=None):
+    """Per frame (true focal, frame's focal, its std_rel, window's focal, its std_rel,
+    restarted); the frames' estimates are appended to ``estimates`` when it is a list."""
     if WORLD:
         preset = replace(WORLD_PRESETS[preset], **WORLD)
     seq = world_frames(preset, seed, n, variant, zoom_frame=n // 2 if zoom != 1.0 else None,
@@ -389,6 +391,8 @@ def run_sequence(preset, seed, n, variant, zoom=1.0):
                              options=OPTIONS)
         w = win.add(est, k / 30)
         rows.append((fr.focal, est.focal, est.std_rel, w.focal, w.std_rel, w.changed))
+        if estimates is not None:
+            estimates.append(est)
     return rows
 
 
@@ -450,6 +454,65 @@ def window(presets, sequences, first_seed, variant, zoom_sequences):
         )
 
 
+def _objects_pooled(estimates, budget: bool) -> float | None:
+    """log f of a window that pools each object's focal lengths over its frames first (objects
+    matched by instance id; weights 1 / noise, as the window weighs frames), then the objects,
+    weighted by their pooled noise or, with ``budget``, by their systematic budget (the median
+    of their frames' variance less noise) plus it."""
+    rows = {}
+    for est in estimates:
+        if est.focal is not None:
+            for iid, (f, sd, sn) in est.object_focals.items():
+                rows.setdefault(iid, []).append((np.log(f), sd * sd, sn * sn))
+    if not rows:
+        return None
+    y, w = [], []
+    for a in map(np.array, rows.values()):
+        inv = 1.0 / a[:, 2]
+        y.append(np.sum(inv * a[:, 0]) / inv.sum())
+        w.append(1.0 / (1.0 / inv.sum() + (np.median(a[:, 1] - a[:, 2]) if budget else 0.0)))
+    y, w = np.array(y), np.array(w)
+    return float(np.sum(w * y) / w.sum())
+
+
+def objects(presets, sequences, first_seed, variant):
+    """A trial, not kept: the window pools frames; here each object is pooled over the
+    window's frames first, then the objects (the principal point as each frame corrected it,
+    not pooled). Same static sequences and scoring as the window part."""
+    print("\n| preset | sequences | single frames: median abs error % | window of frames: ratio "
+          "(90% interval) | objects pooled, noise weights | objects pooled, budget weights |")
+    print("|---|---|---|---|---|---|")
+    for preset in presets:
+        errs = {m: [] for m in ("single", "window", "noise", "budget")}
+        for q in range(sequences):
+            ests = []
+            rows = run_sequence(preset, first_seed + q, 30, variant, estimates=ests)
+            for m in errs:
+                errs[m].append([])
+            for k in range(5, len(rows)):
+                truth, f, _, wf, _, _ = rows[k]
+                if f is not None:
+                    errs["single"][-1].append(abs(np.log(f / truth)))
+                if wf is not None:
+                    errs["window"][-1].append(abs(np.log(wf / truth)))
+                for m in ("noise", "budget"):
+                    y = _objects_pooled(ests[max(0, k - 29): k + 1], m == "budget")
+                    if y is not None:
+                        errs[m][-1].append(abs(y - np.log(truth)))
+
+        def ratio(m, pick):
+            return (np.median(np.concatenate([errs[m][i] for i in pick]))
+                    / np.median(np.concatenate([errs["single"][i] for i in pick])))
+
+        boot = np.random.default_rng(0).integers(0, sequences, (1000, sequences))
+        cells = []
+        for m in ("window", "noise", "budget"):
+            lo, hi = np.percentile([ratio(m, b) for b in boot], [5, 95])
+            cells.append(f"{ratio(m, np.arange(sequences)):.2f} ({lo:.2f}-{hi:.2f})")
+        print(f"| {preset} | {sequences} | {100 * np.median(np.concatenate(errs['single'])):.2f} "
+              f"| {' | '.join(cells)} |", flush=True)
+
+
 def zoom(presets, zoom_sequences, first_seed, variant):
     """What keeps a zoom sequence from being within 5% for good in 15 frames: the window's
     restart (frames from the zoom to the first restart after it) or the sequence's own frames
@@ -502,13 +565,15 @@ def main() -> None:
                               "instead")
     ap.add_argument("--parts", nargs="+", default=["single", "bias", "window"],
                     choices=["single", "bias", "window", "zoom", "preset_bias", "pipes",
-                             "weights", "tau"],
+                             "weights", "tau", "objects"],
                     help="zoom (not run by default): what keeps each zoom sequence from "
                     "settling, the restart or the frames themselves; preset_bias (not run by "
                     "default): fcop_ros's signed median over --bias-frames frames of each full "
                     "preset; pipes (not run by default): a JPEG'd NOCS image alone and in "
                     "`predicted`, on --frames frames; weights (not run by default): "
-                    "what ranks the objects' errors within a frame, over --bias-frames frames")
+                    "what ranks the objects' errors within a frame, over --bias-frames frames; "
+                    "objects (not run by default): a window that pools each object over its "
+                    "frames first, on the window part's static sequences (a trial, not kept)")
     ap.add_argument("--bias-frames", type=int, default=2000,
                     help="frames per preset for preset_bias")
     ap.add_argument("--objects", type=int, default=None,
@@ -582,6 +647,8 @@ def main() -> None:
         weights(presets, args.bias_frames, frame_seed, variant)
     if "tau" in args.parts:
         tau(presets, args.frames, frame_seed, variant)
+    if "objects" in args.parts:
+        objects(presets, args.sequences, seq_seed, variant)
 
 
 if __name__ == "__main__":
