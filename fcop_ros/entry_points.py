@@ -34,7 +34,22 @@ def _as_ctrl_c(signum, frame):
     raise KeyboardInterrupt
 
 
+def _quiet_half_built_logger(unraisable) -> None:
+    """``sys.unraisablehook`` that leaves out one error: rclpy's RcutilsLogger sets its
+    ``logger_sublogger_namepair`` after its name, and a Ctrl-C between the two makes its
+    ``__del__`` print an AttributeError (nothing was registered, so nothing is lost). Every
+    other unraisable error goes to the hook before it."""
+    exc = unraisable.exc_value
+    if isinstance(exc, AttributeError) and exc.name == "logger_sublogger_namepair":
+        return
+    _hook_before(unraisable)
+
+
+_hook_before = sys.unraisablehook
+
+
 def _run(module: str, prog: str, interrupted: int) -> int:
+    sys.unraisablehook = _quiet_half_built_logger
     if interrupted:
         signal.signal(signal.SIGTERM, _as_ctrl_c)
     main, stopped = _import_main(module)
