@@ -26,8 +26,12 @@ frame stamped 0 or far in the future) and are dropped and counted per input
 another input has already arrived there, the jump is real (a looped bag, a camera that paused)
 and the held messages are used. A real jump back (older than the last emitted set by more than
 ``reset_after``) clears all queues and starts again (``stats.resets``), as does
-:meth:`reset`. A message slightly older than the last emitted set is dropped as late; a second
-message with the same stamp on one input, waiting or already used in a set, as a duplicate.
+:meth:`reset`; the other inputs' messages still on the old clock (more than ``reset_after``
+after the stamp that jumped: a NOCS network's answers to the previous lap of a looped bag)
+are then dropped as ``time_jump_reset`` until each input jumps too (queued, they would sort
+after every new stamp and hold the new sets back). A message slightly older than the last
+emitted set is dropped as late; a second message with the same stamp on one input, waiting or
+already used in a set, as a duplicate.
 """
 from __future__ import annotations
 
@@ -123,6 +127,8 @@ class StampSynchronizer:
         self._last: int | None = None
         self._used: list[deque] = [deque(maxlen=64) for _ in range(self.n)]  # stamps in sets
         if clocks:
+            # After a jump back: stamps above these are the old clock's (see the docstring).
+            self._stale_above: list[int | None] = [None] * self.n
             self._ref: list[int | None] = [None] * self.n  # last accepted stamp per input
             self._steps: list[deque] = [deque(maxlen=9) for _ in range(self.n)]  # forward steps
             self._held: list[list] = [[] for _ in range(self.n)]  # a jump awaiting confirmation
@@ -173,6 +179,12 @@ class StampSynchronizer:
         and :attr:`outliers_dropped`."""
         stamp = int(stamp_ns)
         self.accepted, self.outliers_dropped = [], []
+        stale = self._stale_above[index]
+        if stale is not None:
+            if stamp > stale:
+                self.stats.drop("time_jump_reset", index)
+                return []
+            self._stale_above[index] = None  # this input has jumped back too
         fits = self._fits(index, stamp)
         others = [self._fits(j, stamp) for j in range(self.n)
                   if j != index and self._ref[j] is not None]
@@ -207,6 +219,11 @@ class StampSynchronizer:
                 self.stats.drop("time_jump_reset", None, pending)
                 self.stats.resets += 1
                 self.reset()
+                self._stale_above = [
+                    stamp_ns + self.reset_ns if j != index and ref is not None
+                    and ref > stamp_ns + self.reset_ns else None
+                    for j, ref in enumerate(self._ref)
+                ]
             elif stamp_ns in self._used[index]:
                 self.stats.drop("duplicate", index)
                 return []
