@@ -245,6 +245,17 @@ def test_intake_forgets_a_delay_once_the_input_comes_first():
     assert intake.queue_advice() == ""
 
 
+def test_intake_takes_a_looped_bags_repeated_stamps_for_no_delay():
+    """A hostile user's trial: all inputs of each stamp together, but a 2 s bag looped. The
+    second lap's stamps were matched with the first lap's arrivals, and the advice read 'mask
+    comes 2002 ms after the nocs of its stamp: queue_size must be above 60.1'."""
+    intake = Intake(StampSynchronizer(3, queue_size=5), INPUT_NAMES)
+    for lap in range(2):
+        _steps(None, [(i, 10 * SEC + k * FRAME_DT, lap * 2.0 + k / 30 + i / 1000)
+                      for k in range(60) for i in range(3)], intake)
+        assert intake.queue_advice() == ""
+
+
 def test_intake_counts_what_a_smaller_queue_drops():
     """A newcomer's review: messages a run-time queue_size cut dropped reached the
     synchroniser's stats but not the node's count of dropped input."""

@@ -25,6 +25,8 @@ FLOWING_SECONDS = 5.0
 SILENT_SECONDS = 5.0
 #: An input that sent this many times the messages of the slowest one is a faster input.
 FASTER = 1.5
+#: Stamps per input whose arrival is kept for the delays (queue_size advice).
+_STAMPS_KEPT = 128
 
 
 @dataclass(frozen=True)
@@ -55,28 +57,32 @@ class Intake:
         self._last_match: float | None = None  # clock time of the last matched set
         self._said_flowing: set = set()  # drop reasons said at INFO since their last WARN
         self.received = [0] * len(self.inputs)  # messages per input
-        # (stamp, clock time) of each input's recent messages, and how late each input's newest
-        # message came after the first of its stamp (s; None until known): queue_size advice.
+        # (stamp, clock time) of each input's recent messages: rates and ages.
         self._arrivals = [deque(maxlen=128) for _ in self.inputs]
-        self._when: list = [{} for _ in self.inputs]  # stamp -> clock time, the same messages
+        # For queue_size advice, stamp -> clock time of the messages that passed the stamp check
+        # since time last jumped back (a looped bag's stamps come again, seconds later: no
+        # delay), and how late each input's newest came after the first of its stamp (s; None
+        # until known).
+        self._when: list = [{} for _ in self.inputs]
         self._lag: list = [None] * len(self.inputs)
         self._first: float | None = None  # clock time of the first message of any input
 
     def _note_arrival(self, index: int, stamp: int, now: float) -> None:
-        seen = self._arrivals[index]
-        if len(seen) == seen.maxlen:
-            self._when[index].pop(seen[0][0], None)
-        seen.append((stamp, now))
-        self._when[index].setdefault(stamp, now)
+        """Note a message that passed the stamp check: its delay after the first message of its
+        stamp (or, matching approximately, of a stamp within the slop) on the other inputs."""
+        when = self._when[index]
+        if len(when) >= _STAMPS_KEPT:
+            del when[next(iter(when))]
+        when.setdefault(stamp, now)
         slop = self.sync.slop_ns
         first = []
-        for j, when in enumerate(self._when):
+        for j, other in enumerate(self._when):
             if j == index:
                 continue
-            if stamp in when:
-                first.append(when[stamp])
+            if stamp in other:
+                first.append(other[stamp])
             elif slop > 0:  # approximate matching: the nearest recent stamps
-                first += [t for s, t in islice(reversed(self._arrivals[j]), 16)
+                first += [t for s, t in islice(reversed(other.items()), 16)
                           if abs(s - stamp) <= slop]
         # First of its stamp: on time now, whatever it was before.
         self._lag[index] = now - min(first) if first else 0.0
@@ -156,7 +162,7 @@ class Intake:
         self.received[index] += 1
         if self._first is None:
             self._first = now
-        self._note_arrival(index, stamp, now)
+        self._arrivals[index].append((stamp, now))
         before, before_inputs = Counter(stats.dropped), Counter(stats.per_input)
         resets = stats.resets
         sets = sync.add(index, stamp, msg)
@@ -165,6 +171,11 @@ class Intake:
         new_drops = stats.dropped - before
         new_inputs = stats.per_input - before_inputs
         jumped = stats.resets != resets
+        if jumped:
+            self._when = [{} for _ in self.inputs]
+            self._lag = [None] * len(self.inputs)
+        for i, s, _ in sync.accepted:
+            self._note_arrival(i, s, now)
         dropped, log = Counter(), []
         for i, stamps, ref in sync.outliers_dropped:
             dropped[f"outlier_stamp_{inputs[i]}"] += len(stamps)
