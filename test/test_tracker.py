@@ -123,7 +123,7 @@ def test_frame_outcome_says_what_each_step_means_without_a_node():
                          "the window keeps its 640x480 frames"),)
     small = estimate(300.0, size=(320, 240))
     said = frame_outcome(small, t.add(small, 4))
-    assert said.kept and [e[:2] for e in said.log] == [("event", "resized")]
+    assert said.kept and [e[:2] for e in said.log] == [("info", "resized")]
     assert "from 640x480 to 320x240: new focal window" in said.log[0][2]
     nothing = empty((320, 240))
     said = frame_outcome(nothing, t.add(nothing, 5))
@@ -144,7 +144,7 @@ def test_frame_outcome_says_a_zoom_each_time_the_window_restarts():
     for k in range(10, 20):
         est = estimate(750.0)
         lines += [e for e in frame_outcome(est, t.add(est, k)).log if e[1] == "zoom"]
-    assert len(lines) == 1 and lines[0][0] == "event", lines
+    assert len(lines) == 1 and lines[0][0] == "info", lines
     assert lines[0][2].startswith("focal length changed (zoom?): window restarted")
 
 

@@ -14,8 +14,9 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class FrameOutcome:
     """``dropped``: reason -> frames dropped; ``warnings``: reason -> count; ``log``: (level,
-    throttle key, line), level 'warn' (throttled by key) or 'event' (said every time: a change
-    of image size, a zoom); ``kept``: whether the frame reached the window."""
+    throttle key, line), level 'warn' or 'info' (a change of image size, a zoom), each said at
+    most once per throttle period for its key and words; ``kept``: whether the frame reached
+    the window."""
 
     dropped: Counter
     warnings: Counter
@@ -47,12 +48,12 @@ def frame_outcome(est, step) -> FrameOutcome:
                     f"frame without focal evidence: {est.reason}"))
     if step.resized_from is not None:
         ow, oh = step.resized_from
-        log.append(("event", "resized", f"image size changed from {ow}x{oh} to "
+        log.append(("info", "resized", f"image size changed from {ow}x{oh} to "
                                         f"{w}x{h}: new focal window"))
     win = step.window_estimate
     if win.changed:
         at = "no focal yet" if win.focal is None else f"{win.focal:.1f} px"
-        log.append(("event", "zoom", "focal length changed (zoom?): " + (
+        log.append(("info", "zoom", "focal length changed (zoom?): " + (
             "window restarted" if win.zoom is None else
             f"x{win.zoom:.3f} as the objects' image sizes show; the window keeps its "
             f"{win.frames} frames at the new focal") + f", now at {at}"))

@@ -351,12 +351,11 @@ class FcopNode(Node):
         self._say(step.log)
 
     def _say(self, log) -> None:
-        """Log (level, key, line) entries: 'warn' and 'info' throttled by key, 'event' always."""
+        """Log (level 'warn' or 'info', key, line) entries, throttled by key and the line's
+        words: a resize or a zoom is said at once, but two cameras on one topic, alternating
+        sizes, said it for every frame."""
         for level, key, text in log:
-            if level == "event":
-                self.get_logger().info(text)
-            else:
-                (self._throttle.warn if level == "warn" else self._throttle.info)(key, text)
+            (self._throttle.warn if level == "warn" else self._throttle.info)(key, text)
 
     def _hand_off(self, sets) -> None:
         """Give the worker each matched frame (under self._lock); a frame it had not taken yet
