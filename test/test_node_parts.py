@@ -656,6 +656,15 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
             "stamps differ",
         ),  # with an estimate, the same hint instead of blaming a silent topic
         (
+            {"input_ages": (("depth", 0.03), ("nocs", 0.03), ("mask", 0.03)),
+             "sync_dropped": 84, "dropped": {"sync_unmatched": 84}},
+            Rates(5.0, 20, 20, 0, answered=44, inputs=(44, 44, 44)),
+            DiagnosticStatus.WARN,
+            "(84 messages dropped as unmatched while 20 frames matched: no message of their "
+            "stamps came on the other inputs (lost in transport? large images between "
+            "processes need config/fastdds_large_images.xml",
+        ),  # a hostile trial: equal stamps, 40% of each input lost; 'stamps differ' before
+        (
             {"busy_for": 1.0},
             QUIET,
             DiagnosticStatus.OK,

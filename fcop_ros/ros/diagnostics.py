@@ -283,6 +283,13 @@ def _sync_hint(d: DiagnosticsInput, silent: list, rates: Rates) -> str:
     count, words = max(others, key=lambda cw: cw[0])
     if count > max(unmatched, full):
         return f"{count} messages {words}"
+    if unmatched >= full and unmatched and rates.matched:
+        # Stamps that match for some frames are not different clocks: the others' messages of
+        # these stamps never came.
+        return (f"{unmatched} messages dropped as unmatched while {rates.matched} frames "
+                "matched: no message of their stamps came on the other inputs (lost in "
+                "transport? large images between processes need "
+                "config/fastdds_large_images.xml; or an input that answers only some frames)")
     if unmatched >= full and unmatched:
         return (f"{unmatched} messages dropped as unmatched: the inputs' stamps differ (exact "
                 "sync needs equal stamps; sync_mode approximate matches within sync_slop)")
