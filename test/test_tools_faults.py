@@ -362,6 +362,31 @@ def test_loop_on_a_damaged_bag_says_the_damage_once(tmp_path):
     assert len(damage) == 1 and damage[0].startswith(f"bag damaged ({r.damaged}); looping over")
 
 
+@pytest.mark.parametrize("frames, said", [(8, True), (40, False)])
+def test_loop_says_when_the_bag_is_too_short_for_the_node_to_tell_a_lap(tmp_path, frames, said):
+    """A hostile user's trial: a 12-frame bag played with --loop gave CameraInfo for the first
+    lap only, the rest dropped as duplicates (the README says why; diagnostics blamed the
+    driver). The player now says so once; a bag of 40 frames at 30 Hz (1.3 s) loops."""
+    from fcop_ros.tools import replay_play
+    from fcop_ros.ros.spin import ros_context
+    import threading
+
+    bag = tmp_path / "bag"
+    mb.make_bag(bag, SequenceSpec(frames, 160, 120, 150.0, None, None, "mild", 2), seed=3)
+    stop, lines = threading.Event(), []
+    timer = threading.Timer(1.5, stop.set)
+    with ros_context() as (ctx, _):
+        timer.start()
+        r = replay_play.play(bag, list(mb.TOPICS.values())[:3], rate=50.0, loop=True,
+                             context=ctx, stop=stop, wait_subscribers=0, say=lines.append)
+    timer.cancel()
+    short = [ln for ln in lines if "loop a longer bag" in ln]
+    assert r.laps >= 2, r
+    assert len(short) == int(said), lines
+    if said:
+        assert short[0].startswith(f"the bag's depth images span {(frames - 1) / 30:.2f} s")
+
+
 def empty_topic_bag(path):
     img = depth_to_image(np.ones((8, 8)), "32FC1", header_from_ns(START))
     with BagWriter(path, "mcap") as w:

@@ -17,9 +17,11 @@ from .replay_base import (IMAGE_TYPE, ReplayError, check_distinct, check_not_emp
 
 @dataclass
 class PlayResult:
-    """What a --play run did: messages published, /clock messages, and the damage it met."""
+    """What a --play run did: messages published, /clock messages, laps played to their end
+    (with --loop), and the damage it met."""
 
     published: int = 0
+    laps: int = 0
     clock: int = 0
     damaged: str = ""
     no_subscriber: tuple = ()  # topics still without a subscriber when the wait ended
@@ -65,6 +67,15 @@ def _check_numbers(rate: float, clock_hz: float, wait_subscribers: float) -> Non
         if not (math.isfinite(value) and (value > 0 if positive else value >= 0)):
             raise ReplayError(f"{option} must be a finite number {'> 0' if positive else '>= 0'}"
                               f", got {value:g}")
+
+
+def _too_short_to_loop(times: list) -> bool:
+    """Whether depth images at bag times ``times`` (ns) span too little for a loop back to be
+    told from jitter: the node's synchroniser needs three stamps more than 1 s back (see the
+    README's sync section)."""
+    if len(times) < 2:
+        return True
+    return times[-1] - times[0] <= 1_000_000_000 + 2 * (times[1] - times[0])
 
 
 def _readable(source: BagSource, topics):
@@ -176,6 +187,7 @@ def play(
     try:
         if wait_subscribers > 0:
             result.no_subscriber = _wait_for_subscribers(node, pubs, wait_subscribers, stop, say)
+        depth_times: list = []  # the first lap's depth message times, to judge a loop
         while not stop.is_set():
             start_wall, start_bag, before = None, None, result.published
             last_clock[0] = None  # a loop starts the bag's time over, as rosbag2 does
@@ -184,6 +196,8 @@ def play(
                     break
                 if start_wall is None:
                     start_wall, start_bag = time.monotonic(), ts
+                if topic == image_topics[0] and not result.laps:
+                    depth_times.append(ts)
                 if not wait_until(
                     start_wall + (ts - start_bag) * 1e-9 / rate, start_wall, start_bag, ts
                 ):
@@ -198,6 +212,12 @@ def play(
             result.damaged = source.damaged
             if not loop or start_wall is None:
                 break
+            if not result.laps and not stop.is_set() and _too_short_to_loop(depth_times):
+                say(f"the bag's depth images span {(depth_times[-1] - depth_times[0]) / 1e9:.2f}"
+                    " s: fcop_node takes a new lap's stamps for a loop only when they lie more "
+                    "than 1 s (reset_after) plus two frame intervals back, so after the first "
+                    "lap it drops them as duplicates; loop a longer bag")
+            result.laps += 1
     except ExternalShutdownException:  # SIGTERM or Ctrl-C: rclpy shut the context down
         raise KeyboardInterrupt from None
     except rclpy_implementation.RCLError:
