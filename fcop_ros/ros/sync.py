@@ -39,6 +39,10 @@ import bisect
 from collections import Counter, deque
 from dataclasses import dataclass, field
 
+#: Seconds a stamp must lie from its input's clock to be a jump (the default of ``reset_after``,
+#: the node's): a looped bag restarts the synchroniser only if it lasts longer.
+RESET_AFTER = 1.0
+
 
 @dataclass
 class SyncStats:
@@ -88,7 +92,7 @@ class StampSynchronizer:
     """
 
     def __init__(self, n_inputs: int, queue_size: int = 10, slop: float = 0.0,
-                 reset_after: float = 1.0, confirm: int = 3):
+                 reset_after: float = RESET_AFTER, confirm: int = 3):
         if n_inputs < 1 or queue_size < 1 or slop < 0 or reset_after <= 0 or confirm < 1:
             raise ValueError("StampSynchronizer: need n_inputs >= 1, queue_size >= 1, slop >= 0, "
                              "reset_after > 0, confirm >= 1")

@@ -9,6 +9,7 @@ import time
 from dataclasses import dataclass
 
 from ..ros.dds import use_large_image_profile
+from ..ros.sync import RESET_AFTER
 from ..ros.topics import INPUTS
 from .bagio import BagSource
 from .replay_base import (IMAGE_TYPE, ReplayError, check_distinct, check_not_empty,
@@ -70,12 +71,10 @@ def _check_numbers(rate: float, clock_hz: float, wait_subscribers: float) -> Non
 
 
 def _too_short_to_loop(times: list) -> bool:
-    """Whether depth images at bag times ``times`` (ns) span too little for a loop back to be
-    told from jitter: the node's synchroniser needs three stamps more than 1 s back (see the
-    README's sync section)."""
-    if len(times) < 2:
-        return True
-    return times[-1] - times[0] <= 1_000_000_000 + 2 * (times[1] - times[0])
+    """Whether depth images at bag times ``times`` (ns, at least one) span too little for a
+    loop back to be told from jitter: the node's synchroniser needs three stamps more than
+    ``RESET_AFTER`` back (see the README's sync section)."""
+    return len(times) < 2 or times[-1] - times[0] <= RESET_AFTER * 1e9 + 2 * (times[1] - times[0])
 
 
 def _readable(source: BagSource, topics):
@@ -212,11 +211,12 @@ def play(
             result.damaged = source.damaged
             if not loop or start_wall is None:
                 break
-            if not result.laps and not stop.is_set() and _too_short_to_loop(depth_times):
+            if (not result.laps and depth_times and not stop.is_set()
+                    and _too_short_to_loop(depth_times)):
                 say(f"the bag's depth images span {(depth_times[-1] - depth_times[0]) / 1e9:.2f}"
                     " s: fcop_node takes a new lap's stamps for a loop only when they lie more "
-                    "than 1 s (reset_after) plus two frame intervals back, so after the first "
-                    "lap it drops them as duplicates; loop a longer bag")
+                    f"than {RESET_AFTER:g} s (reset_after) plus two frame intervals back, so "
+                    "after the first lap it drops them as duplicates; loop a longer bag")
             result.laps += 1
     except ExternalShutdownException:  # SIGTERM or Ctrl-C: rclpy shut the context down
         raise KeyboardInterrupt from None
