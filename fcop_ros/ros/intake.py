@@ -25,8 +25,8 @@ FLOWING_SECONDS = 5.0
 SILENT_SECONDS = 5.0
 #: An input that sent this many times the messages of the slowest one is a faster input.
 FASTER = 1.5
-#: Stamps per input whose arrival is kept for the delays (queue_size advice).
-_STAMPS_KEPT = 128
+#: Messages per input whose arrival is kept: for rates and ages, and for delays.
+_KEPT = 128
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,7 @@ class Intake:
         self._said_flowing: set = set()  # drop reasons said at INFO since their last WARN
         self.received = [0] * len(self.inputs)  # messages per input
         # (stamp, clock time) of each input's recent messages: rates and ages.
-        self._arrivals = [deque(maxlen=128) for _ in self.inputs]
+        self._arrivals = [deque(maxlen=_KEPT) for _ in self.inputs]
         # For queue_size advice, stamp -> clock time of the messages that passed the stamp check
         # since time last jumped back (a looped bag's stamps come again, seconds later: no
         # delay), and how late each input's newest came after the first of its stamp (s; None
@@ -71,7 +71,7 @@ class Intake:
         """Note a message that passed the stamp check: its delay after the first message of its
         stamp (or, matching approximately, of a stamp within the slop) on the other inputs."""
         when = self._when[index]
-        if len(when) >= _STAMPS_KEPT:
+        if len(when) >= _KEPT:
             del when[next(iter(when))]
         when.setdefault(stamp, now)
         slop = self.sync.slop_ns

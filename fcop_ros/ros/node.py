@@ -607,7 +607,7 @@ class FcopNode(Node):
                                      "answer is logged, and a refusal counted in /diagnostics)")
             else:
                 response.message += f"; {self.set_info_client.srv_name} is not available"
-        self.get_logger().info(f"{response.message}")
+        self.get_logger().info(response.message)
         return response
 
     def _on_set_camera_info_done(self, future) -> None:
@@ -693,11 +693,11 @@ class FcopNode(Node):
             return
         level, text = news
         if level == DiagnosticStatus.OK:
-            self.get_logger().info(f"{text}")
+            self.get_logger().info(text)
         elif level == DiagnosticStatus.ERROR:
-            self.get_logger().error(f"{text}")
+            self.get_logger().error(text)
         else:
-            self._throttle.warn("health", f"{text}")
+            self._throttle.warn("health", text)
 
     def destroy_node(self):
         if self.worker is not None:
