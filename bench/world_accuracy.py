@@ -404,6 +404,20 @@ def zoom_sequence(preset, seed, variant, factor):
     return rows, (bad[-1] + 1 if bad else 0)
 
 
+def _ratio_cell(win, single) -> str:
+    """'ratio (90% interval)' of the window's median abs error to the single frames', both
+    lists of per-sequence lists of errors: a sequence's frames share its errors, so the
+    interval resamples sequences (1000 bootstrap draws)."""
+    def ratio(pick):
+        return (np.median(np.concatenate([win[i] for i in pick]))
+                / np.median(np.concatenate([single[i] for i in pick])))
+
+    n = len(single)
+    boot = np.random.default_rng(0).integers(0, n, (1000, n))
+    lo, hi = np.percentile([ratio(b) for b in boot], [5, 95])
+    return f"{ratio(np.arange(n)):.2f} ({lo:.2f}-{hi:.2f})"
+
+
 def window(presets, sequences, first_seed, variant, zoom_sequences):
     print(
         "\n| preset | sequences | single frames: median abs error % | window: median abs error % "
@@ -436,18 +450,11 @@ def window(presets, sequences, first_seed, variant, zoom_sequences):
             for factor in (1.25, 0.8):
                 delays.append(zoom_sequence(preset, first_seed + 100 + q, variant, factor)[1])
 
-        def ratio(pick):
-            return (np.median(np.concatenate([win[i] for i in pick]))
-                    / np.median(np.concatenate([single[i] for i in pick])))
-
-        boot = np.random.default_rng(0).integers(0, sequences, (1000, sequences))
-        lo, hi = np.percentile([ratio(b) for b in boot], [5, 95])
-        every = np.arange(sequences)
         med_single = np.median(np.concatenate(single))
         print(
             f"| {preset} | {sequences} | {100 * med_single:.2f} | "
             f"{100 * np.median(np.concatenate(win)):.2f} | "
-            f"{ratio(every):.2f} ({lo:.2f}-{hi:.2f}) | "
+            f"{_ratio_cell(win, single)} | "
             f"{np.median(np.concatenate(oracle)) / med_single:.2f} | "
             f"{100 * np.mean(cover):.0f}% | {restarts} | {sorted(delays)} |",
             flush=True,
@@ -500,15 +507,7 @@ def objects(presets, sequences, first_seed, variant):
                     if y is not None:
                         errs[m][-1].append(abs(y - np.log(truth)))
 
-        def ratio(m, pick):
-            return (np.median(np.concatenate([errs[m][i] for i in pick]))
-                    / np.median(np.concatenate([errs["single"][i] for i in pick])))
-
-        boot = np.random.default_rng(0).integers(0, sequences, (1000, sequences))
-        cells = []
-        for m in ("window", "noise", "budget"):
-            lo, hi = np.percentile([ratio(m, b) for b in boot], [5, 95])
-            cells.append(f"{ratio(m, np.arange(sequences)):.2f} ({lo:.2f}-{hi:.2f})")
+        cells = [_ratio_cell(errs[m], errs["single"]) for m in ("window", "noise", "budget")]
         print(f"| {preset} | {sequences} | {100 * np.median(np.concatenate(errs['single'])):.2f} "
               f"| {' | '.join(cells)} |", flush=True)
 

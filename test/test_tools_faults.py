@@ -341,22 +341,29 @@ def test_corrupt_metadata_on_an_intact_mcap_is_said_as_such_not_as_damage(bag, t
     assert f"{broken}/metadata.yaml is unreadable" in one_line(err) and "published 15" in out
 
 
-def test_loop_on_a_damaged_bag_says_the_damage_once(tmp_path):
+def _play_looped(bag, seconds=1.5):
+    """(PlayResult, the lines it said) of ``bag``'s three image topics played with --loop at
+    50x for ``seconds``, without waiting for subscribers."""
     from fcop_ros.tools import replay_play
     from fcop_ros.ros.spin import ros_context
     import threading
 
+    stop, lines = threading.Event(), []
+    timer = threading.Timer(seconds, stop.set)
+    with ros_context() as (ctx, _):
+        timer.start()
+        r = replay_play.play(bag, list(mb.TOPICS.values())[:3], rate=50.0, loop=True,
+                             context=ctx, stop=stop, wait_subscribers=0, say=lines.append)
+    timer.cancel()
+    return r, lines
+
+
+def test_loop_on_a_damaged_bag_says_the_damage_once(tmp_path):
     cut = tmp_path / "cut"
     mb.make_bag(cut, SequenceSpec(8, 160, 120, 150.0, None, None, "mild", 4), seed=3)
     f = next(cut.glob("*.mcap"))
     f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
-    stop, lines = threading.Event(), []
-    timer = threading.Timer(1.5, stop.set)
-    with ros_context() as (ctx, _):
-        timer.start()
-        r = replay_play.play(cut, list(mb.TOPICS.values())[:3], rate=50.0, loop=True,
-                             context=ctx, stop=stop, wait_subscribers=0, say=lines.append)
-    timer.cancel()
+    r, lines = _play_looped(cut)
     damage = [ln for ln in lines if "damaged" in ln]
     assert r.damaged and r.published > 20, r
     assert len(damage) == 1 and damage[0].startswith(f"bag damaged ({r.damaged}); looping over")
@@ -367,19 +374,9 @@ def test_loop_says_when_the_bag_is_too_short_for_the_node_to_tell_a_lap(tmp_path
     """A hostile user's trial: a 12-frame bag played with --loop gave CameraInfo for the first
     lap only, the rest dropped as duplicates (the README says why; diagnostics blamed the
     driver). The player now says so once; a bag of 40 frames at 30 Hz (1.3 s) loops."""
-    from fcop_ros.tools import replay_play
-    from fcop_ros.ros.spin import ros_context
-    import threading
-
     bag = tmp_path / "bag"
     mb.make_bag(bag, SequenceSpec(frames, 160, 120, 150.0, None, None, "mild", 2), seed=3)
-    stop, lines = threading.Event(), []
-    timer = threading.Timer(1.5, stop.set)
-    with ros_context() as (ctx, _):
-        timer.start()
-        r = replay_play.play(bag, list(mb.TOPICS.values())[:3], rate=50.0, loop=True,
-                             context=ctx, stop=stop, wait_subscribers=0, say=lines.append)
-    timer.cancel()
+    r, lines = _play_looped(bag)
     short = [ln for ln in lines if "loop a longer bag" in ln]
     assert r.laps >= 2, r
     assert len(short) == int(said), lines
