@@ -422,6 +422,14 @@ def check_principal_point_std(h):
     assert h.node.last_estimate.principal_point_offset is None
 
 
+def check_lens_distortion_std(h):
+    frames_then(h, 1)
+    with_term = h.node.last_estimate
+    set_ok(h, lens_distortion_std=0.0)
+    frames_then(h, 1, first=1)
+    assert with_term.std_rel_lens > 0 and h.node.last_estimate.std_rel_lens == 0.0
+
+
 def _skewed(h, k, skew_ns):
     d, n, m = frame_messages(cam(0), T0 + k * DT)
     n.header = header_from_ns(T0 + k * DT + skew_ns, FRAME_ID)

@@ -2,13 +2,14 @@
 refusal of NOCS that only look like evidence, reflection invariance, the focal range, and a
 frame with 10,000 instances. Numbers in the comments were measured on these seeds."""
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from fcop_ros import EstimatorOptions, FocalWindow, WindowOptions, estimate_focal
 from fcop_ros.synthetic import scenes
-from fcop_ros.synthetic.world import ZERO_MEAN_FAMILIES, world_frames
+from fcop_ros.synthetic.world import WORLD_PRESETS, ZERO_MEAN_FAMILIES, world_frame, world_frames
 
 FIRST_SEED = 7000  # not the tuning seeds (1000..) nor the held-out ones (900000..)
 
@@ -89,9 +90,10 @@ def test_window_averages_on_moving_camera():
 def test_zoom_on_the_world_short_of_the_aim():
     """Eight zoom sequences of the predicted preset (seeds 7600-7603, x1.25 and x0.8 at frame 20
     of 40, window of 30): frames until the window is within 5% of the new focal length for
-    good, counted from the zoom (20: never). Measured 20, 4, 6, 2, 1, 1, 20, 3, seven changes
-    and five carried (the same without the principal point's term), since the world's principal
-    point left the image centre; before, 20, 20, 1, 1, 1, 1, 20, 1 and seven
+    good, counted from the zoom (20: never). Measured 2, 4, 1, 7, 1, 1, 20, 3, eight changes
+    and eight carried, since the world's lens (25 Nov 2026); 20, 4, 6, 2, 1, 1, 20, 3, seven
+    changes and five carried (the same without the principal point's term), since the world's
+    principal point left the image centre; before, 20, 20, 1, 1, 1, 1, 20, 1 and seven
     changes detected (six at frame 21, one at 30): the objects' extents show the zoom at its
     second frame, and at six of the seven the window keeps its older frames at the zoom the
     radii measure (0.765-0.800 for 0.8, 1.249-1.269 for 1.25). Restarting instead (until this
@@ -114,8 +116,8 @@ def test_zoom_on_the_world_short_of_the_aim():
                 if k >= 20 and (r.focal is None or abs(np.log(r.focal / fr.focal)) > 0.05):
                     bad.append(k - 20)
             delays.append(bad[-1] + 1 if bad else 0)
-    assert sum(d <= 15 for d in delays) >= 6 and max(d for d in delays if d < 20) <= 6
-    assert changes >= 6 and carried >= 5
+    assert sum(d <= 15 for d in delays) >= 7 and max(d for d in delays if d < 20) <= 7
+    assert changes >= 7 and carried >= 7
 
 
 def _garbage(fr, kind, rng):
@@ -171,10 +173,11 @@ def test_nocs_with_a_constant_channel_give_no_focal():
 # name the channel. Of the 480 frames of seeds 0-39 at both sizes, `predicted` and `sensor`, with
 # each channel constant in turn, 457 named it before and 476 now; the 4 others answer (-62% to
 # +80%, std_rel 19-121%; `python bench/hostile_inputs.py lost-channel`, 24 Nov 2026): no object
-# of theirs is solid enough in view to show the flat NOCS.
+# of theirs is solid enough in view to show the flat NOCS. Since the `sensor` preset's lens (25
+# Nov 2026) its seed 31 with channel 2 flat is one of those that answer (-81%, std_rel 15%).
 @pytest.mark.parametrize("preset, seed, channel", [
     ("predicted", 5, 0), ("predicted", 27, 2), ("predicted", 33, 0), ("sensor", 4, 1),
-    ("sensor", 22, 0), ("sensor", 31, 2)])
+    ("sensor", 22, 0)])
 def test_a_frame_refused_early_with_a_lost_channel_names_it(preset, seed, channel):
     fr = frame(preset, seed, (320, 240))
     flat = fr.nocs.copy()
@@ -268,7 +271,8 @@ def test_ten_thousand_instances_are_answered_with_linear_work():
 def test_an_assumed_principal_point_is_estimated_from_the_objects_and_its_doubt_reported():
     """Tuning-world `sensor` frames (seeds 7000-7059), whose principal points lie up to 2% of
     the image off its centre (rms 0.67% per axis), estimated at the centre as the node does
-    without camera_info_in. Without the principal point's term (principal_point_std 0):
+    without camera_info_in; without the preset's lens (since 25 Nov 2026), whose term would
+    cover what this one is for. Without the principal point's term (principal_point_std 0):
     measured median |e| 0.141%, coverage of 2 std_rel 75%. With it (the default 0.75%): the
     objects' disagreement moves the principal point and f with it, 0.062% and 93% (0.072% and
     95% with central differences, before 93164a6). Given the true principal point: 0.0045% and
@@ -276,7 +280,7 @@ def test_an_assumed_principal_point_is_estimated_from_the_objects_and_its_doubt_
     def run(options=None, given=False):
         err, cover, parts = [], [], []
         for s in range(60):
-            fr = frame("sensor", s)
+            fr = world_frame(pinhole, FIRST_SEED + s)
             est = estimate_focal(fr.depth, fr.nocs, fr.mask,
                                  fr.principal_point if given else None, options, seed=s,
                                  poses=False)
@@ -285,8 +289,9 @@ def test_an_assumed_principal_point_is_estimated_from_the_objects_and_its_doubt_
             parts.append(est.std_rel_principal_point)
         return np.median(err), np.mean(cover), np.array(parts)
 
-    e0, c0, p0 = run(EstimatorOptions(principal_point_std=0.0))
-    e1, c1, p1 = run()
+    pinhole = replace(WORLD_PRESETS["sensor"], lens=0.0)
+    e0, c0, p0 = run(EstimatorOptions(principal_point_std=0.0, lens_distortion_std=0.0))
+    e1, c1, p1 = run(EstimatorOptions(lens_distortion_std=0.0))
     e2, _, p2 = run(given=True)
     assert np.all(p0 == 0) and np.all(p2 == 0) and np.all(p1 > 0)
     assert c0 < 0.8 and 0.9 <= c1 <= 0.98

@@ -35,6 +35,7 @@ from .correspondences import (
     nocs_range_hint,
 )
 from .error_model import depth_influence, object_variances
+from .lens import lens_gradients
 from .object_fit import _plain_rows, fit_objects
 from .pose import ObjectPose, umeyama
 from .principal_point import (PrincipalPointEvidence, focal_gradients, offset_information,
@@ -66,8 +67,11 @@ class FocalEstimate:
     spread ``object_tau``; a frame of one object pays it whole). std_rel_principal_point: the
     part of std_rel that the principal point's uncertainty makes (none where it is given; the
     frame's objects move f with it, each by its own gradient, and it persists from frame to
-    frame). principal_point_offset: (dx, dy) px, where the objects' disagreement puts an
-    assumed principal point relative to it (their focal lengths are corrected by it; None where
+    frame). std_rel_lens: the part of std_rel that a residual radial distortion of the
+    rectified image (``lens_distortion_std``) could make: each object's fit redone on its pixels
+    undistorted by it (:mod:`.lens`); one k1 moves every object and frame alike.
+    principal_point_offset: (dx, dy) px, where the objects' disagreement puts an assumed
+    principal point relative to it (their focal lengths are corrected by it; None where
     the principal point is given). principal_point_evidence: what the frame's objects say of
     that offset, which a :class:`~.window.FocalWindow` pools over its frames (None where the
     principal point is given). focal_votes: the stabbed value of the triplet votes.
@@ -107,6 +111,7 @@ class FocalEstimate:
     std_rel_noise: float | None = None
     std_rel_prior: float | None = None
     std_rel_principal_point: float | None = None
+    std_rel_lens: float | None = None
     principal_point_offset: tuple[float, float] | None = None
     principal_point_evidence: PrincipalPointEvidence | None = field(default=None, repr=False)
     votes_per_object: dict = field(default_factory=dict)
@@ -821,12 +826,17 @@ def estimate_focal(
     if assumed:
         est.principal_point_evidence = PrincipalPointEvidence(
             pp_std.copy(), delta, pp_cov, info, data, repeating, g_frame)
+    # A lens's residual distortion moves every object's f the same way (one k1 for the image):
+    # a term of the frame and of each object, not of their disagreement.
+    g_lens = lens_gradients(support, f0, seed, opt.lens_distortion_std, opt, np.log(fits.focal))
+    var_lens_obj = (g_lens * opt.lens_distortion_std) ** 2
+    var_lens = float((w_noise @ g_lens[idx_used] / w_noise.sum() * opt.lens_distortion_std) ** 2)
     for k, (inst, used) in enumerate(zip(kept, comb.used)):
         j = good_idx[k]
         if used:
             est.object_focals[inst.instance_id] = (
                 float(np.exp(logf[j])),
-                float(np.sqrt(var[j] + var_pp_obj[j])),
+                float(np.sqrt(var[j] + var_pp_obj[j] + var_lens_obj[j])),
                 float(np.sqrt(fits.var_log_focal[j])),  # var[j] adds to it (.error_model)
             )
         else:
@@ -841,9 +851,10 @@ def estimate_focal(
     est.std_rel_noise = float(np.sqrt(comb.noise))
     est.std_rel_prior = float(np.sqrt(max(comb.prior, 0.0)))
     est.std_rel_principal_point = float(np.sqrt(var_pp))
+    est.std_rel_lens = float(np.sqrt(var_lens))
     combined = [inst for inst, u in zip(kept, comb.used) if u]
-    return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var + var_pp)), used, opt,
-                   rng, poses, combined)
+    return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var + var_pp + var_lens)),
+                   used, opt, rng, poses, combined)
 
 
 def _object_budgets(support, fits, good, spread, raw_spread, opt: EstimatorOptions):

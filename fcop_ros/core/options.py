@@ -91,6 +91,9 @@ class EstimatorOptions:
     at the image centre, may be off (a fraction of the image's width and height, per axis): the
     prior of the offset the objects' disagreement shows, by which f is corrected; what remains
     uncertain of it widens std_rel through each object's gradient of f by the principal point.
+    ``lens_distortion_std``: the standard deviation of the radial distortion k1 (x (1 + k1 r^2),
+    r normalised by the focal length) that a rectified image still has; what it could do to f
+    widens std_rel (it never moves f: one image's objects cannot tell it from their own errors).
 
     ``method``: "stabbing" (triplet votes and interval stabbing, as the paper's fCOP-IS, then
     the refinement above unless ``refine=False``; ``PAPER_FCOP_IS`` is the paper's method taken
@@ -128,6 +131,9 @@ class EstimatorOptions:
     # The rms of REAL275's camera's offsets (0.5% and 1.0% of width and height), the one real
     # camera the tuning world is calibrated against.
     principal_point_std: float = 0.0075
+    # The tuning world's lens family (k1 uniform in +-0.01: 1.8 px at the corners of a 640x480
+    # image at f = 600 px) has this standard deviation.
+    lens_distortion_std: float = 0.0058
     method: str = "stabbing"
     ransac_hypotheses: int = 400
     ransac_threshold: float = 0.005
@@ -172,7 +178,7 @@ _EST_NUMBERS = {
     "edge_sigma": (0.0, np.inf), "unseen_depth_error": (0.0, np.inf),
     "shape_error": (0.0, np.inf), "object_tau": (0.0, np.inf),
     "object_tau_weight": (0.0, np.inf), "pose_max_std": (0.0, np.inf),
-    "principal_point_std": (0.0, 0.5),
+    "principal_point_std": (0.0, 0.5), "lens_distortion_std": (0.0, 0.5),
     "ransac_threshold": (1e-12, np.inf),
 }
 # ... of which these must also be finite.

@@ -110,6 +110,13 @@ PARAMETERS: dict[str, ParamSpec] = {
         "what remains uncertain widens the reported uncertainty (0: neither).",
         range=(0.0, 0.5),
     ),
+    "lens_distortion_std": ParamSpec(
+        0.0058,
+        "How much radial distortion k1 (x (1 + k1 r^2), r normalised by the focal length) the "
+        "rectified images may still have: what it could do to the focal length widens the "
+        "reported uncertainty; it never moves the focal length (0: a perfect lens).",
+        range=(0.0, 0.5),
+    ),
     "sync_mode": ParamSpec(
         "exact",
         "'exact' (equal stamps) or 'approximate' (within sync_slop).",
@@ -195,6 +202,7 @@ def estimator_options(p: dict) -> EstimatorOptions:
         noise_bound=NoiseBound(p["noise_bound"], p["noise_bound_mode"]),
         focal_range=(p["focal_min"], p["focal_max"]),
         min_object_pixels=p["min_object_pixels"],
+        lens_distortion_std=p["lens_distortion_std"],
     )
 
 

@@ -134,6 +134,15 @@ tuning model's. Every mechanism is zero-mean as the families are except three: t
 principal point (a camera model taken for granted: the distortion's sign and the point's
 direction are random, their sizes are not zero-mean) and the holes (which remove depth and
 never change it).
+An eleventh (``variant="heldout11"``, fixed on 25 Nov 2026 before the tuning world's lens family
+was judged by any estimator) differs from the tuning model only in its camera: the tuning
+world's lens is a Brown polynomial (``lens``, below), heldout11's a division model, x = xd /
+(1 + l rd^2), with decentering (tangential) terms p1, p2, l up to 1.2 times the tuning bound and
+p1, p2 up to 0.2 times it (a lens model the polynomial is not, and a stronger one: at the
+objects' radii the decentering moves points up to 0.43 px off a pinhole, the tuning lens 0.04
+px, and it magnifies an object in proportion to its radius, not its square); its
+principal point and predictor errors are the tuning model's. It judges a term for the lens's
+residual distortion on a lens that term was not shaped on.
 """
 from __future__ import annotations
 
@@ -168,7 +177,11 @@ class ErrorFamilies:
     uniform direction in [-1, 1] per axis, kept for the sequence, sub-pixel: the scene is
     rendered through that camera and the frame's ``principal_point`` says where it is). It is
     drawn from a generator of its own, so that the other families' draws stay as they were, and
-    only in the tuning model (``heldout9`` moves it its own way).
+    only in the tuning model (``heldout9`` moves it its own way). lens: the camera's residual
+    radial distortion after rectification, x (1 + k1 r^2 + k2 r^4) in coordinates normalised by
+    the focal length about the principal point, k1 uniform in +-lens and k2 in +-lens / 2, kept
+    for the sequence (zero-mean in sign; drawn from a generator of its own, as the principal
+    point; only in the tuning model, ``heldout10`` and ``heldout11`` have lenses of their own).
     """
 
     depth_scale: float = 0.0
@@ -189,12 +202,13 @@ class ErrorFamilies:
     blobs: int = 0
     nocs_jpeg: bool = False
     principal_point: float = 0.0
+    lens: float = 0.0
 
     def scaled(self, k: float) -> "ErrorFamilies":
         """Every continuous strength times k (integers and the field scales unchanged)."""
         return replace(self, **{f.name: getattr(self, f.name) * k for f in fields(self)
                                 if isinstance(getattr(self, f.name), float)
-                                and f.name not in ("field_drift", "principal_point")})
+                                and f.name not in ("field_drift", "principal_point", "lens")})
 
     def draw(self, rng: np.random.Generator) -> "ErrorFamilies":
         """The strengths of one sequence: each family uniform in [0, bound] (integers inclusive;
@@ -202,8 +216,8 @@ class ErrorFamilies:
         out = {}
         for f in fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, bool) or isinstance(v, tuple) or f.name == "principal_point":
-                out[f.name] = v  # the principal point's own generator draws it
+            if isinstance(v, (bool, tuple)) or f.name in ("principal_point", "lens"):
+                out[f.name] = v  # the camera's own generator draws these
             elif f.name == "field_drift":  # a depth network errs anew in every view, more or less
                 out[f.name] = float(rng.uniform(v / 3, v))
             elif isinstance(v, int):
@@ -214,18 +228,21 @@ class ErrorFamilies:
 
 
 ZERO_MEAN_FAMILIES = ("field", "relief", "offset", "depth_pixel", "nocs_pixel",
-                      "nocs_field", "shape")
+                      "nocs_field", "shape", "lens")
 
 # A camera's principal point is rarely exactly at the image centre (REAL275's: 0.5% and 1.0%
 # of width and height off it); no gain scales it.
 _PRINCIPAL_POINT = 0.02
+# Nor is a rectified image free of distortion: a calibration's residual k1 up to +-0.01 moves the
+# corners of a 640x480 image at f = 600 px by up to 1.8 px.
+_LENS = 0.01
 _SENSOR = ErrorFamilies(depth_scale=0.0, field=0.01, field_drift=0.6, relief=0.0, offset=0.004,
                         depth_pixel=0.004, edge_px=2, flying=0.5, mask_px=2,
-                        principal_point=_PRINCIPAL_POINT)
+                        principal_point=_PRINCIPAL_POINT, lens=_LENS)
 _PREDICTED = ErrorFamilies(depth_scale=0.15, field=0.05, field_drift=0.6, relief=0.10, offset=0.02,
                            depth_pixel=0.005, edge_px=3, flying=0.3, nocs_pixel=0.04,
                            nocs_field=0.03, nocs_outliers=0.05, nocs_blur_px=3, shape=0.10,
-                           mask_px=3, blobs=2, principal_point=_PRINCIPAL_POINT)
+                           mask_px=3, blobs=2, principal_point=_PRINCIPAL_POINT, lens=_LENS)
 # Scale factors of the two presets, calibrated so that the paper's method taken literally scores
 # near the paper's REAL275 figures (bench/world_calibration.py prints the fit).
 SENSOR_GAIN = 1.0
@@ -342,7 +359,7 @@ def _lens_row_field(rng, h, w, cells):
 
 
 VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5", "heldout6",
-            "heldout7", "heldout8", "heldout9", "heldout10")
+            "heldout7", "heldout8", "heldout9", "heldout10", "heldout11")
 # heldout7's image fields are the tuning grid's, drawn per segment (ErrorState._segments);
 # heldout8's finer ones are the tuning grid's, grown with depth (ErrorState._grown);
 # heldout9 has no image field: its depth fields are sinusoids fixed in the scene
@@ -351,7 +368,7 @@ VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5",
 _FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field,
            "heldout3": _poly_field, "heldout4": _ring_field, "heldout5": _tile_field,
            "heldout6": _lens_row_field, "heldout7": _grid_field, "heldout8": _grid_field,
-           "heldout9": _grid_field, "heldout10": _grid_field}
+           "heldout9": _grid_field, "heldout10": _grid_field, "heldout11": _grid_field}
 # heldout8's familiar-size cue: the typical size (bounding-box diagonal, m; the geometric mean
 # of SceneSpec's range) and the spread of log sizes that one unit of the field stands for.
 _TYPICAL_SIZE = 0.17
@@ -1128,12 +1145,17 @@ def _one_segment(label, mx, my):
     return inside & (first >= 0) & same[0] & same[1] & same[2]
 
 
-def _remapped(depth, nocs, mask, segments, mx, my):
+def _remapped(depth, nocs, mask, segments, mx, my, exact=False):
     """depth, NOCS and mask resampled at (mx, my): bilinearly where the four pixels about a
     point are of one of ``segments`` and of finite depth, else from the nearest one (the mask
-    always); outside the image NaN depth, NOCS 0 and mask 0."""
+    always); outside the image NaN depth, NOCS 0 and mask 0. OpenCV's bilinear weights are
+    quantised to 1/32 pixel, which leaves points that move less than 1/64 where they were;
+    ``exact`` weighs in float64 instead (heldout10 keeps OpenCV's, as it was evaluated)."""
     def at(img, how, fill=0.0):
-        return cv2.remap(img, mx, my, how, borderMode=cv2.BORDER_CONSTANT, borderValue=fill)
+        if exact and how == cv2.INTER_LINEAR:
+            return _bilinear(img, mx, my)
+        return cv2.remap(img, mx.astype(np.float32), my.astype(np.float32), how,
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=fill)
 
     ok = np.isfinite(depth)
     smooth = _one_segment(np.where(ok, segments, -1.0), mx, my)
@@ -1141,6 +1163,20 @@ def _remapped(depth, nocs, mask, segments, mx, my):
                      at(depth, cv2.INTER_NEAREST, np.nan))
     nocs = np.where(smooth[..., None], at(nocs, cv2.INTER_LINEAR), at(nocs, cv2.INTER_NEAREST))
     return depth, nocs, at(mask, cv2.INTER_NEAREST, 0)
+
+
+def _bilinear(img, mx, my):
+    """``img`` (H, W[, C]) at the points (mx, my) by bilinear weights in float64 (points off the
+    image read its nearest edge pixels; :func:`_remapped` uses only those inside)."""
+    h, w = img.shape[:2]
+    x0 = np.clip(np.floor(mx).astype(np.int64), 0, w - 2)
+    y0 = np.clip(np.floor(my).astype(np.int64), 0, h - 2)
+    fx, fy = np.clip(mx - x0, 0.0, 1.0), np.clip(my - y0, 0.0, 1.0)
+    if img.ndim == 3:
+        fx, fy = fx[..., None], fy[..., None]
+    top = img[y0, x0] * (1 - fx) + img[y0, x0 + 1] * fx
+    bottom = img[y0 + 1, x0] * (1 - fx) + img[y0 + 1, x0 + 1] * fx
+    return top * (1 - fy) + bottom * fy
 
 
 def _through_lens(seen, truth, state, rng, px):
@@ -1242,7 +1278,7 @@ def _mask_errors(mask, nocs, px, rng, variant, state=None):
     polygon with holes; ``heldout5``: fill to the convex hull; ``heldout6``: through a 28x28
     mask head; ``heldout7``: by a width kept for the sequence in ``state``, then bleed into
     touching instances; ``heldout8``: grow and cut by a detection box; ``heldout9`` and
-    ``heldout10``: as the tuning variant) each instance by up to
+    ``heldout10`` and ``heldout11``: as the tuning variant) each instance by up to
     ``px``
     pixels; grown pixels keep the background depth and take the nearest object's NOCS, as a
     segmentation network's would."""
@@ -1322,7 +1358,9 @@ def world_frames(preset: str | ErrorFamilies, seed: int, n_frames: int = 1,
     objs, f, (centre, up), (w, h) = world_scene(rng, spec, focal, size, objects)
     errors = fam.draw(rng)
     state = ErrorState.start(errors, rng, variant, renew)
-    pp = _principal_point(errors.principal_point if variant == "tuning" else 0.0, seed, w, h)
+    camera = variant in ("tuning", "heldout11")  # the others' cameras are their own
+    pp = _principal_point(errors.principal_point if camera else 0.0, seed, w, h)
+    undistort = _lens(errors.lens if camera else 0.0, seed, variant)
     out = []
     for k in range(n_frames):
         R = Rotation.from_rotvec(np.radians(orbit_deg * k) * up).as_matrix()
@@ -1330,8 +1368,9 @@ def world_frames(preset: str | ErrorFamilies, seed: int, n_frames: int = 1,
                              R @ (o.translation - centre) + centre, o.scale)
                  for o in objs]
         fk = f * (zoom_factor if zoom_frame is not None and k >= zoom_frame else 1.0)
-        out.append(apply_errors(render(moved, fk, w, h, principal_point=pp, table=(centre, up)),
-                                state, rng))
+        truth = render(moved, fk, w, h, principal_point=pp, table=(centre, up))
+        seen = apply_errors(truth, state, rng)
+        out.append(seen if undistort is None else _distorted(seen, truth.mask, undistort))
     return WorldSequence(out, errors, (w, h))
 
 
@@ -1344,6 +1383,44 @@ def _principal_point(bound: float, seed: int, w: int, h: int):
     off = rng.uniform(0, bound) * rng.uniform(-1, 1, 2) * np.array([w, h])
     cx, cy = image_centre(w, h)
     return (cx + float(off[0]), cy + float(off[1]))
+
+
+def _lens(bound: float, seed: int, variant: str):
+    """The sequence's lens for a ``lens`` bound, as the map from a distorted normalised point
+    (xd, yd) to the pinhole's (x, y); None (a pinhole) at 0. Drawn from a generator of the
+    seed's own. ``heldout11``'s is a division model with decentering, x = xd / (1 + l rd^2)
+    less the tangential terms of (p1, p2), l uniform in +-1.2 ``bound`` and p1, p2 in
+    +-0.2 ``bound`` (a lens model the tuning world's Brown polynomial is not)."""
+    if bound <= 0:
+        return None
+    rng = np.random.default_rng([seed, 105])
+    if variant != "heldout11":
+        k1, k2 = float(rng.uniform(-1, 1) * bound), float(rng.uniform(-0.5, 0.5) * bound)
+        return lambda xd, yd: _undistort(xd, yd, k1, k2)
+    lam = float(rng.uniform(-1.2, 1.2) * bound)
+    p1, p2 = (float(v) for v in rng.uniform(-0.2, 0.2, 2) * bound)
+
+    def division(xd, yd):
+        r2 = xd * xd + yd * yd
+        return (xd / (1 + lam * r2) - (2 * p1 * xd * yd + p2 * (r2 + 2 * xd * xd)),
+                yd / (1 + lam * r2) - (p1 * (r2 + 2 * yd * yd) + 2 * p2 * xd * yd))
+    return division
+
+
+def _distorted(seen: Frame, truth, undistort) -> Frame:
+    """The frame ``seen`` (rendered through a pinhole) as a camera takes it whose lens maps
+    each distorted normalised point to the pinhole's by ``undistort``, about the same principal
+    point; ``truth`` (the true mask) with ``seen``'s marks the segments not to interpolate
+    across."""
+    h, w = seen.mask.shape
+    cx, cy = seen.principal_point
+    vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
+    x, y = undistort((uu - cx) / seen.focal, (vv - cy) / seen.focal)
+    mx, my = cx + seen.focal * x, cy + seen.focal * y
+    segments = truth.astype(np.float64) * (float(seen.mask.max()) + 1.0) + seen.mask
+    depth, nocs, mask = _remapped(seen.depth, seen.nocs, seen.mask, segments, mx, my, exact=True)
+    nocs[mask == 0] = 0.0
+    return replace(seen, depth=depth, nocs=nocs, mask=mask)
 
 
 def world_frame(preset: str | ErrorFamilies, seed: int, variant: str = "tuning", **kw) -> Frame:

@@ -1,0 +1,35 @@
+"""A rectified image's residual radial distortion (``lens_distortion_std``): how far it could
+move each object's focal length, for std_rel (``std_rel_lens``; the distortion itself is not
+estimated: one image's objects cannot tell a k1 from their own errors, and a trial that
+estimated it took the smooth depth errors for it, docs/BENCHMARKS.md).
+
+A distortion x (1 + k1 |x / f|^2) magnifies an object by about 1 + 2 k1 r^2, yet the fit's
+answer moves far more where the depth is noisy: the fit weighs the pixels by their residuals and
+explains the magnification's change across the object by perspective, trading its distance and
+f (on tuning frames with 0.4% depth noise, -0.3 to -1.7% of f per 0.01 of k1 where the
+magnification alone is +0.01 to +0.12%). So each object's gradient comes from a refit, as the
+principal point's does (:func:`~.principal_point.focal_gradients`).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .object_fit import fit_objects
+
+
+def lens_gradients(support, f0: float, seed: int, k1_std: float, options, logf) -> np.ndarray:
+    """(O,) d log f / d k1 of every object: its fit redone on its pixels undistorted by one
+    standard deviation ``k1_std`` of k1 (the same pixels as the fit ``logf`` came from), the
+    forward difference; zeros where ``k1_std`` is 0 or a refit fails."""
+    grads = np.zeros(len(support))
+    if k1_std <= 0 or not support:
+        return grads
+    moved = [replace(inst, x=inst.x * (1.0 - k1_std * np.sum(inst.x * inst.x, axis=1,
+                                                              keepdims=True) / f0**2))
+             for inst in support]
+    fits = fit_objects(moved, f0, max_pixels=options.fit_pixels, depth_tilt=options.depth_tilt,
+                       iterations=options.fit_iterations, rng=np.random.default_rng(seed))
+    g = (np.where(fits.ok, np.log(fits.focal), np.nan) - logf) / -k1_std
+    return np.where(np.isfinite(g), g, 0.0)
