@@ -796,6 +796,7 @@ def estimate_focal(
     raw_spread = np.array([_nocs_spread(i.p) for i in instances])
     var, tau0 = _object_budgets(support, fits, good, spread, raw_spread, opt)
     logf = np.log(fits.focal)
+    g_lens = lens_gradients(support, f0, seed, opt.lens_distortion_std, opt, logf)
     noise = np.minimum(fits.var_log_focal[good], var[good])  # as combine_objects clips it
     grads, pp_cov = np.zeros((len(support), 2)), np.zeros((2, 2))
     assumed = bool(np.any(pp_std > 0))
@@ -828,7 +829,6 @@ def estimate_focal(
             pp_std.copy(), delta, pp_cov, info, data, repeating, g_frame)
     # A lens's residual distortion moves every object's f the same way (one k1 for the image):
     # a term of the frame and of each object, not of their disagreement.
-    g_lens = lens_gradients(support, f0, seed, opt.lens_distortion_std, opt, np.log(fits.focal))
     var_lens_obj = (g_lens * opt.lens_distortion_std) ** 2
     var_lens = float((w_noise @ g_lens[idx_used] / w_noise.sum() * opt.lens_distortion_std) ** 2)
     for k, (inst, used) in enumerate(zip(kept, comb.used)):

@@ -16,7 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .object_fit import fit_objects
+from .object_fit import refit_log_focal_change
 
 
 def lens_gradients(support, f0: float, seed: int, k1_std: float, options, logf) -> np.ndarray:
@@ -29,7 +29,4 @@ def lens_gradients(support, f0: float, seed: int, k1_std: float, options, logf) 
     moved = [replace(inst, x=inst.x * (1.0 - k1_std * np.sum(inst.x * inst.x, axis=1,
                                                               keepdims=True) / f0**2))
              for inst in support]
-    fits = fit_objects(moved, f0, max_pixels=options.fit_pixels, depth_tilt=options.depth_tilt,
-                       iterations=options.fit_iterations, rng=np.random.default_rng(seed))
-    g = (np.where(fits.ok, np.log(fits.focal), np.nan) - logf) / -k1_std
-    return np.where(np.isfinite(g), g, 0.0)
+    return refit_log_focal_change(moved, f0, seed, options, logf, -k1_std)

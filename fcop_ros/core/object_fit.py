@@ -174,6 +174,18 @@ def _rodrigues(w):
     return R
 
 
+def refit_log_focal_change(moved, f0: float, seed: int, options, logf, step: float
+                           ) -> np.ndarray:
+    """(O,) forward difference (log f' - ``logf``) / ``step`` of each object's focal length, f'
+    from its fit redone on ``moved`` (its pixels moved by one ``step`` of some error; the same
+    pixels as the fit ``logf`` came from, by ``seed``); 0 where the refit fails. ``options``:
+    the fit's settings (an EstimatorOptions)."""
+    fits = fit_objects(moved, f0, max_pixels=options.fit_pixels, depth_tilt=options.depth_tilt,
+                       iterations=options.fit_iterations, rng=np.random.default_rng(seed))
+    g = (np.where(fits.ok, np.log(fits.focal), np.nan) - logf) / step
+    return np.where(np.isfinite(g), g, 0.0)
+
+
 def fit_objects(instances, focal0: float, fix_focal: bool = False, iterations: int = 12,
                 max_pixels: int = 600, depth_tilt: bool = True, proper: bool = False,
                 rng: np.random.Generator | None = None) -> ObjectFits:

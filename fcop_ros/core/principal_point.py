@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .object_fit import fit_objects
+from .object_fit import refit_log_focal_change
 
 
 def focal_gradients(support, f0: float, seed: int, pp_std, options, logf) -> np.ndarray:
@@ -37,11 +37,7 @@ def focal_gradients(support, f0: float, seed: int, pp_std, options, logf) -> np.
         shift[axis] = step
         # x is measured from the principal point: moving it by +shift moves x by -shift.
         moved = [replace(inst, x=inst.x - shift) for inst in support]
-        fits = fit_objects(moved, f0, max_pixels=options.fit_pixels,
-                           depth_tilt=options.depth_tilt, iterations=options.fit_iterations,
-                           rng=np.random.default_rng(seed))
-        g = (np.where(fits.ok, np.log(fits.focal), np.nan) - logf) / step
-        grads[:, axis] = np.where(np.isfinite(g), g, 0.0)
+        grads[:, axis] = refit_log_focal_change(moved, f0, seed, options, logf, step)
     return grads
 
 
