@@ -150,6 +150,7 @@ from dataclasses import dataclass, field, fields, replace
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from ..core.camera import image_centre
 from .render import Frame, random_scene, render
@@ -895,8 +896,6 @@ def _bleed(mask, new, nocs, px, state, rng):
     kept for the sequence) takes the other's pixels within a width of 1..``px`` drawn anew in
     every frame, with the NOCS of its own nearest pixel: the neighbour's surface labelled, and
     coordinated, as the wrong object."""
-    from scipy import ndimage
-
     ids = [int(i) for i in np.unique(mask[mask > 0])]
     for a in ids:
         dist, (iy, ix) = ndimage.distance_transform_edt(mask != a, return_indices=True)
@@ -1168,15 +1167,11 @@ def _remapped(depth, nocs, mask, segments, mx, my, exact=False):
 def _bilinear(img, mx, my):
     """``img`` (H, W[, C]) at the points (mx, my) by bilinear weights in float64 (points off the
     image read its nearest edge pixels; :func:`_remapped` uses only those inside)."""
-    h, w = img.shape[:2]
-    x0 = np.clip(np.floor(mx).astype(np.int64), 0, w - 2)
-    y0 = np.clip(np.floor(my).astype(np.int64), 0, h - 2)
-    fx, fy = np.clip(mx - x0, 0.0, 1.0), np.clip(my - y0, 0.0, 1.0)
-    if img.ndim == 3:
-        fx, fy = fx[..., None], fy[..., None]
-    top = img[y0, x0] * (1 - fx) + img[y0, x0 + 1] * fx
-    bottom = img[y0 + 1, x0] * (1 - fx) + img[y0 + 1, x0 + 1] * fx
-    return top * (1 - fy) + bottom * fy
+    at = [my, mx]
+    if img.ndim == 2:
+        return ndimage.map_coordinates(img, at, order=1, mode="nearest")
+    return np.stack([ndimage.map_coordinates(img[..., c], at, order=1, mode="nearest")
+                     for c in range(img.shape[2])], -1)
 
 
 def _through_lens(seen, truth, state, rng, px):
@@ -1192,10 +1187,16 @@ def _through_lens(seen, truth, state, rng, px):
         *(float(v) for v in rng.normal(0, 0.006 * px / 3, 2) * [w, h])))
     cx, cy = seen.principal_point
     mx, my = _lens_maps((h, w), seen.focal, (cx, cy), (cx + dx, cy + dy), k1, -k1 / 4)
+    return replace(_taken_at(seen, truth, mx, my, exact=False), principal_point=(cx + dx, cy + dy))
+
+
+def _taken_at(seen: Frame, truth, mx, my, exact: bool) -> Frame:
+    """The frame ``seen`` resampled at (mx, my) (:func:`_remapped`), its NOCS 0 off the masks;
+    ``truth`` (the true mask) with ``seen``'s marks the segments not to interpolate across."""
     segments = truth.astype(np.float64) * (float(seen.mask.max()) + 1.0) + seen.mask
-    depth, nocs, mask = _remapped(seen.depth, seen.nocs, seen.mask, segments, mx, my)
+    depth, nocs, mask = _remapped(seen.depth, seen.nocs, seen.mask, segments, mx, my, exact)
     nocs[mask == 0] = 0.0
-    return replace(seen, depth=depth, nocs=nocs, mask=mask, principal_point=(cx + dx, cy + dy))
+    return replace(seen, depth=depth, nocs=nocs, mask=mask)
 
 
 def _boxed(m, px, rng):
@@ -1416,11 +1417,7 @@ def _distorted(seen: Frame, truth, undistort) -> Frame:
     cx, cy = seen.principal_point
     vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
     x, y = undistort((uu - cx) / seen.focal, (vv - cy) / seen.focal)
-    mx, my = cx + seen.focal * x, cy + seen.focal * y
-    segments = truth.astype(np.float64) * (float(seen.mask.max()) + 1.0) + seen.mask
-    depth, nocs, mask = _remapped(seen.depth, seen.nocs, seen.mask, segments, mx, my, exact=True)
-    nocs[mask == 0] = 0.0
-    return replace(seen, depth=depth, nocs=nocs, mask=mask)
+    return _taken_at(seen, truth, cx + seen.focal * x, cy + seen.focal * y, exact=True)
 
 
 def world_frame(preset: str | ErrorFamilies, seed: int, variant: str = "tuning", **kw) -> Frame:
