@@ -13,7 +13,8 @@ from fcop_ros.synthetic.world import (WORLD_PRESETS, ErrorFamilies, _distorted, 
 def test_the_lens_term_predicts_what_a_distortion_does_to_f():
     """Eight `sensor` frames without a lens, then taken through k1 = -0.01 and +0.01: the
     focal length moves by -0.03 to -1.43 per unit of k1 (measured; the magnification alone
-    would be +0.01 to +0.12: noisy depth lets the fit trade distance for f), and
+    would be +0.01 to +0.12, as the frames' truth moves by a script: noisy depth lets the fit
+    trade distance for f), and
     ``std_rel_lens`` / ``lens_distortion_std`` of the undistorted frame, the refit's gradient,
     is 0.9-1.7 times it (measured 0.91-1.69)."""
     fam = replace(WORLD_PRESETS["sensor"], lens=0.0)
