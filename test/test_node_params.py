@@ -428,6 +428,7 @@ def check_lens_distortion_std(h):
     set_ok(h, lens_distortion_std=0.0)
     frames_then(h, 1, first=1)
     assert with_term.std_rel_lens > 0 and h.node.last_estimate.std_rel_lens == 0.0
+    assert with_term.lens_k1 is not None and h.node.last_estimate.lens_k1 is None
 
 
 def _skewed(h, k, skew_ns):

@@ -5,7 +5,8 @@ import numpy as np
 from fcop_ros import EstimatorOptions
 from fcop_ros.core.correspondences import extract_instances
 from fcop_ros.core.object_fit import fit_objects
-from fcop_ros.core.principal_point import focal_gradients, offset_information, offset_posterior
+from fcop_ros.core.offsets import offset_information, offset_posterior
+from fcop_ros.core.principal_point import focal_gradients
 from fcop_ros.synthetic.scenes import clean_frame
 
 
@@ -52,17 +53,24 @@ def test_gradients_are_the_refits_at_a_moved_principal_point():
 
 
 def test_a_frame_hands_its_offsets_evidence_to_the_window():
-    """The evidence a frame carries is the offset it corrected by, from information the
-    objects' repeating errors alone bound (more of it than all their errors give), and none
-    where the principal point is given."""
-    from fcop_ros import estimate_focal
+    """The evidence a frame carries is the offsets (dx, dy, k1) it corrected by, from
+    information the objects' repeating errors alone bound (more of it than all their errors
+    give); where the principal point is given, the lens's k1 alone, and none where neither is
+    estimated."""
+    from fcop_ros import EstimatorOptions, estimate_focal
     fr = clean_frame(3)
     est = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0, poses=False)
-    ev = est.principal_point_evidence
-    assert np.allclose(ev.offset, est.principal_point_offset)
+    ev = est.intrinsics_evidence
+    assert np.allclose(ev.offset, [*est.principal_point_offset, est.lens_k1])
     assert np.all(np.linalg.eigvalsh(ev.repeating - ev.information) > -1e-12)
-    assert np.isclose(ev.gradient @ ev.covariance @ ev.gradient,
-                      est.std_rel_principal_point ** 2)
+    pp, g = ev.covariance[:2, :2], ev.gradient[:2]
+    assert np.isclose(g @ pp @ g, est.std_rel_principal_point ** 2)
+    assert np.isclose(ev.gradient[2] ** 2 * ev.covariance[2, 2], est.std_rel_lens ** 2)
     given = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0, poses=False,
                            principal_point=(319.5, 239.5))
-    assert given.principal_point_evidence is None
+    assert given.principal_point_offset is None and given.lens_k1 is not None
+    assert np.array_equal(given.intrinsics_evidence.offset[:2], [0.0, 0.0])
+    neither = estimate_focal(fr.depth, fr.nocs, fr.mask, seed=0, poses=False,
+                             principal_point=(319.5, 239.5),
+                             options=EstimatorOptions(lens_distortion_std=0.0))
+    assert neither.intrinsics_evidence is None and neither.lens_k1 is None

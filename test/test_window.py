@@ -649,7 +649,7 @@ def _offset_frames(rng, n, repeating_share, true=(6.0, -4.0), focal=600.0):
     each frame's objects tell the offset with information I (a data std of 3 px per axis), of
     which ``repeating_share`` is an error that repeats in every frame; each frame's focal length
     is corrected by its own offset, which the prior of 4.8 px shrinks towards none."""
-    from fcop_ros.core.principal_point import PrincipalPointEvidence, offset_posterior
+    from fcop_ros.core.offsets import IntrinsicsEvidence, offset_posterior
     std, info, g = np.array([4.8, 3.6]), np.eye(2) / 9.0, np.array([1e-3, -5e-4])
     true = np.asarray(true)
     repeated = rng.normal(0, 3.0 * np.sqrt(repeating_share), 2)
@@ -662,7 +662,7 @@ def _offset_frames(rng, n, repeating_share, true=(6.0, -4.0), focal=600.0):
         repeating = info / repeating_share if repeating_share > 0 else info * 1e12
         est = estimate(float(np.exp(logf)), float(np.sqrt(noise**2 + g @ cov @ g)),
                        std_rel_noise=noise)
-        est.principal_point_evidence = PrincipalPointEvidence(std, delta, cov, info,
+        est.intrinsics_evidence = IntrinsicsEvidence(std, delta, cov, info,
                                                               info @ seen, repeating, g)
         out.append(est)
     return out
@@ -672,7 +672,7 @@ def _window_error(ests, focal=600.0, pooled=True):
     w = FocalWindow(WindowOptions(max_frames=30))
     for t, e in enumerate(ests):
         if not pooled:
-            e = replace(e, principal_point_evidence=None)
+            e = replace(e, intrinsics_evidence=None)
         we = w.add(e, float(t))
     return abs(np.log(we.focal / focal)), we.std_rel
 

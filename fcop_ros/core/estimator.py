@@ -38,8 +38,8 @@ from .error_model import depth_influence, object_variances
 from .lens import lens_gradients
 from .object_fit import _plain_rows, fit_objects
 from .pose import ObjectPose, umeyama
-from .principal_point import (PrincipalPointEvidence, focal_gradients, offset_information,
-                              offset_posterior)
+from .offsets import IntrinsicsEvidence, offset_information, offset_posterior
+from .principal_point import focal_gradients
 from .solver import object_votes, solve_triplets
 from .options import EstimatorOptions
 from .stabbing import interval_stabbing, stab_equal_width
@@ -67,14 +67,16 @@ class FocalEstimate:
     spread ``object_tau``; a frame of one object pays it whole). std_rel_principal_point: the
     part of std_rel that the principal point's uncertainty makes (none where it is given; the
     frame's objects move f with it, each by its own gradient, and it persists from frame to
-    frame). std_rel_lens: the part of std_rel that a residual radial distortion of the
-    rectified image (``lens_distortion_std``) could make: each object's fit redone on its pixels
-    undistorted by it (:mod:`.lens`); one k1 moves every object and frame alike.
+    frame). std_rel_lens: the part of std_rel that the uncertainty of a residual radial
+    distortion k1 of the rectified image makes (prior ``lens_distortion_std``; each object's f
+    moves with k1 by its own gradient, :mod:`.lens`, and one k1 persists from frame to frame).
     principal_point_offset: (dx, dy) px, where the objects' disagreement puts an assumed
     principal point relative to it (their focal lengths are corrected by it; None where
-    the principal point is given). principal_point_evidence: what the frame's objects say of
-    that offset, which a :class:`~.window.FocalWindow` pools over its frames (None where the
-    principal point is given). focal_votes: the stabbed value of the triplet votes.
+    the principal point is given). lens_k1: the k1 the objects' disagreement shows (their
+    focal lengths are corrected by it; None where ``lens_distortion_std`` is 0).
+    intrinsics_evidence: what the frame's objects say of those offsets (:mod:`.offsets`), which
+    a :class:`~.window.FocalWindow` pools over its frames (None where neither is estimated).
+    focal_votes: the stabbed value of the triplet votes.
     interval: (lo, hi) focal range in pixels of the maximal consensus region. inlier_count /
     inlier_ratio: votes agreeing with it. votes_per_object / inliers_per_object:
     {instance_id: count}. object_focals: {instance_id: (focal, std_rel, std_rel_noise)} of the
@@ -113,7 +115,8 @@ class FocalEstimate:
     std_rel_principal_point: float | None = None
     std_rel_lens: float | None = None
     principal_point_offset: tuple[float, float] | None = None
-    principal_point_evidence: PrincipalPointEvidence | None = field(default=None, repr=False)
+    lens_k1: float | None = None
+    intrinsics_evidence: IntrinsicsEvidence | None = field(default=None, repr=False)
     votes_per_object: dict = field(default_factory=dict)
     inliers_per_object: dict = field(default_factory=dict)
     object_focals: dict = field(default_factory=dict)
@@ -796,47 +799,48 @@ def estimate_focal(
     raw_spread = np.array([_nocs_spread(i.p) for i in instances])
     var, tau0 = _object_budgets(support, fits, good, spread, raw_spread, opt)
     logf = np.log(fits.focal)
-    g_lens = lens_gradients(support, f0, seed, opt.lens_distortion_std, opt, logf)
     noise = np.minimum(fits.var_log_focal[good], var[good])  # as combine_objects clips it
-    grads, pp_cov = np.zeros((len(support), 2)), np.zeros((2, 2))
-    assumed = bool(np.any(pp_std > 0))
-    if assumed:
-        # The offset of an assumed principal point that the objects' disagreement shows: their
-        # focal lengths corrected by it, its remaining uncertainty into std_rel (.principal_point).
-        grads = focal_gradients(support, f0, seed, pp_std, opt, logf)
+    # The offsets of the intrinsics assumed (an assumed principal point's, a residual lens's
+    # k1) that the objects' disagreement shows: their focal lengths corrected by them, the
+    # uncertainty left into std_rel (.offsets).
+    prior = np.append(pp_std, opt.lens_distortion_std)
+    grads, cov = np.zeros((len(support), 3)), np.zeros((3, 3))
+    estimated = bool(np.any(prior > 0))
+    if estimated:
+        grads[:, :2] = focal_gradients(support, f0, seed, pp_std, opt, logf)
+        grads[:, 2] = lens_gradients(support, f0, seed, opt.lens_distortion_std, opt, logf)
         info, data = offset_information(logf[good], var[good] + tau0**2, grads[good])
-        delta, pp_cov = offset_posterior(info, data, pp_std)
+        delta, cov = offset_posterior(info, data, prior)
         # For the window: the systematic budget repeats while these objects are in view; their
         # noise and the objects' prior spread (the window's frames show it vary) renew.
         repeating, _ = offset_information(logf[good], np.maximum(var[good] - noise, 1e-12),
                                           grads[good])
         logf = logf - grads @ delta
-        est.principal_point_offset = (float(delta[0]), float(delta[1]))
+        if np.any(pp_std > 0):
+            est.principal_point_offset = (float(delta[0]), float(delta[1]))
+        if prior[2] > 0:
+            est.lens_k1 = float(delta[2])
     comb = combine_objects(logf[good], var[good], fits.var_log_focal[good], tau0,
                            opt.object_tau_weight)
     if comb is None:
         est.reason = "no finite per-object estimate"
         return est
     kept = [inst for inst, g in zip(support, good) if g]
-    var_pp_obj = np.einsum("oi,ij,oj->o", grads, pp_cov, grads)
+    var_offsets_obj = np.einsum("oi,ij,oj->o", grads, cov, grads)
     good_idx = np.flatnonzero(good)
     idx_used = good_idx[comb.used]
     w_noise = 1.0 / noise[comb.used]
     g_frame = (w_noise[:, None] * grads[idx_used]).sum(0) / w_noise.sum()
-    var_pp = float(g_frame @ pp_cov @ g_frame)
-    if assumed:
-        est.principal_point_evidence = PrincipalPointEvidence(
-            pp_std.copy(), delta, pp_cov, info, data, repeating, g_frame)
-    # A lens's residual distortion moves every object's f the same way (one k1 for the image):
-    # a term of the frame and of each object, not of their disagreement.
-    var_lens_obj = (g_lens * opt.lens_distortion_std) ** 2
-    var_lens = float((w_noise @ g_lens[idx_used] / w_noise.sum() * opt.lens_distortion_std) ** 2)
+    var_offsets = float(g_frame @ cov @ g_frame)
+    if estimated:
+        est.intrinsics_evidence = IntrinsicsEvidence(
+            prior, delta, cov, info, data, repeating, g_frame)
     for k, (inst, used) in enumerate(zip(kept, comb.used)):
         j = good_idx[k]
         if used:
             est.object_focals[inst.instance_id] = (
                 float(np.exp(logf[j])),
-                float(np.sqrt(var[j] + var_pp_obj[j] + var_lens_obj[j])),
+                float(np.sqrt(var[j] + var_offsets_obj[j])),
                 float(np.sqrt(fits.var_log_focal[j])),  # var[j] adds to it (.error_model)
             )
         else:
@@ -850,10 +854,10 @@ def estimate_focal(
     ]
     est.std_rel_noise = float(np.sqrt(comb.noise))
     est.std_rel_prior = float(np.sqrt(max(comb.prior, 0.0)))
-    est.std_rel_principal_point = float(np.sqrt(var_pp))
-    est.std_rel_lens = float(np.sqrt(var_lens))
+    est.std_rel_principal_point = float(np.sqrt(g_frame[:2] @ cov[:2, :2] @ g_frame[:2]))
+    est.std_rel_lens = float(abs(g_frame[2]) * np.sqrt(cov[2, 2]))
     combined = [inst for inst, u in zip(kept, comb.used) if u]
-    return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var + var_pp + var_lens)),
+    return _finish(est, float(np.exp(comb.mean)), float(np.sqrt(comb.var + var_offsets)),
                    used, opt, rng, poses, combined)
 
 

@@ -1,7 +1,10 @@
-"""A rectified image's residual radial distortion (``lens_distortion_std``): how far it could
-move each object's focal length, for std_rel (``std_rel_lens``; the distortion itself is not
-estimated: one image's objects cannot tell a k1 from their own errors, and a trial that
-estimated it took the smooth depth errors for it, docs/BENCHMARKS.md).
+"""A rectified image's residual radial distortion k1 (prior ``lens_distortion_std``): how far
+it moves each object's focal length, by which the objects' disagreement estimates it like an
+assumed principal point's offset (:mod:`.offsets`; ``FocalEstimate.lens_k1``, its uncertainty
+in ``std_rel_lens``). Objects spread over the image fix it (on 60 `sensor` tuning frames the
+estimate follows the world's k1 with a correlation of 0.50, nearly exactly in frames of four to
+six objects), one object not at all; a window pools it over its frames. A trial that fitted k1
+inside each object's fit instead took the smooth depth errors for it (docs/BENCHMARKS.md).
 
 A distortion x (1 + k1 |x / f|^2) magnifies an object by about 1 + 2 k1 r^2, yet the fit's
 answer moves far more where the depth is noisy: the fit weighs the pixels by their residuals and

@@ -92,8 +92,9 @@ class EstimatorOptions:
     prior of the offset the objects' disagreement shows, by which f is corrected; what remains
     uncertain of it widens std_rel through each object's gradient of f by the principal point.
     ``lens_distortion_std``: the standard deviation of the radial distortion k1 (x (1 + k1 r^2),
-    r normalised by the focal length) that a rectified image still has; what it could do to f
-    widens std_rel (it never moves f: one image's objects cannot tell it from their own errors).
+    r normalised by the focal length) that a rectified image still has: the prior of the k1 the
+    objects' disagreement shows (:mod:`.lens`), by which f is corrected, as by the principal
+    point's offset; what remains uncertain widens std_rel.
 
     ``method``: "stabbing" (triplet votes and interval stabbing, as the paper's fCOP-IS, then
     the refinement above unless ``refine=False``; ``PAPER_FCOP_IS`` is the paper's method taken

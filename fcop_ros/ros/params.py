@@ -113,8 +113,9 @@ PARAMETERS: dict[str, ParamSpec] = {
     "lens_distortion_std": ParamSpec(
         0.0058,
         "How much radial distortion k1 (x (1 + k1 r^2), r normalised by the focal length) the "
-        "rectified images may still have: what it could do to the focal length widens the "
-        "reported uncertainty; it never moves the focal length (0: a perfect lens).",
+        "rectified images may still have: the prior of the k1 the objects' disagreement shows, "
+        "by which the focal length is corrected; what remains uncertain widens the reported "
+        "uncertainty (0: a perfect lens, not estimated).",
         range=(0.0, 0.5),
     ),
     "sync_mode": ParamSpec(

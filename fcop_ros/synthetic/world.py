@@ -1386,6 +1386,13 @@ def _principal_point(bound: float, seed: int, w: int, h: int):
     return (cx + float(off[0]), cy + float(off[1]))
 
 
+def lens_coefficients(bound: float, seed: int) -> tuple[float, float]:
+    """(k1, k2) of the tuning world's lens of a sequence ``seed`` for a ``lens`` bound: k1
+    uniform in +-bound, k2 in +-bound / 2, from a generator of the seed's own."""
+    k1, k2 = np.random.default_rng([seed, 105]).uniform([-1.0, -0.5], [1.0, 0.5]) * bound
+    return float(k1), float(k2)
+
+
 def _lens(bound: float, seed: int, variant: str):
     """The sequence's lens for a ``lens`` bound, as the map from a distorted normalised point
     (xd, yd) to the pinhole's (x, y); None (a pinhole) at 0. Drawn from a generator of the
@@ -1396,7 +1403,7 @@ def _lens(bound: float, seed: int, variant: str):
         return None
     rng = np.random.default_rng([seed, 105])
     if variant != "heldout11":
-        k1, k2 = float(rng.uniform(-1, 1) * bound), float(rng.uniform(-0.5, 0.5) * bound)
+        k1, k2 = lens_coefficients(bound, seed)
         return lambda xd, yd: _undistort(xd, yd, k1, k2)
     lam = float(rng.uniform(-1.2, 1.2) * bound)
     p1, p2 = (float(v) for v in rng.uniform(-0.2, 0.2, 2) * bound)
