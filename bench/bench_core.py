@@ -247,7 +247,7 @@ def main() -> None:
 
     ests = [estimate_focal(fr.depth, fr.nocs, fr.mask, seed=k) for k, fr in enumerate(frames)]
     print(f"FocalWindow.add with 30 frames in the window: median {window_add_ms(ests):.2f} ms; "
-          "the same estimates without their principal-point evidence (no pooling): median "
+          "the same estimates without their intrinsics evidence (no pooling): median "
           f"{window_add_ms([replace(e, intrinsics_evidence=None) for e in ests]):.2f} ms")
 
 

@@ -98,7 +98,14 @@ def _birge_ratio(evidence: list[IntrinsicsEvidence], delta: np.ndarray) -> float
     ranks of their information less the offsets fitted."""
     chi2, dof = 0.0, -int(np.count_nonzero(evidence[-1].prior_std))
     for e in evidence:
-        r = e.data - e.information @ delta
-        chi2 += float(r @ np.linalg.pinv(e.information, rcond=1e-10, hermitian=True) @ r)
-        dof += int(np.linalg.matrix_rank(e.information, hermitian=True))
+        # One eigendecomposition for both: the residual weighed by the information's
+        # pseudo-inverse (eigenvalues above 1e-10 of the largest, numpy's pinv with that
+        # rcond) and the information's rank (numpy's matrix_rank tolerance).
+        vals, vecs = np.linalg.eigh(e.information)
+        size = np.abs(vals)
+        top = size.max(initial=0.0)
+        has = size > 1e-10 * top
+        r = vecs[:, has].T @ (e.data - e.information @ delta)
+        chi2 += float(r @ (r / vals[has]))
+        dof += int(np.count_nonzero(size > top * vals.size * np.finfo(float).eps))
     return max(1.0, chi2 / dof) if dof > 0 else 1.0

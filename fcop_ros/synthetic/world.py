@@ -1401,10 +1401,10 @@ def _lens(bound: float, seed: int, variant: str):
     +-0.2 ``bound`` (a lens model the tuning world's Brown polynomial is not)."""
     if bound <= 0:
         return None
-    rng = np.random.default_rng([seed, 105])
     if variant != "heldout11":
         k1, k2 = lens_coefficients(bound, seed)
         return lambda xd, yd: _undistort(xd, yd, k1, k2)
+    rng = np.random.default_rng([seed, 105])
     lam = float(rng.uniform(-1.2, 1.2) * bound)
     p1, p2 = (float(v) for v in rng.uniform(-0.2, 0.2, 2) * bound)
 
