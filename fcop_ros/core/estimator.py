@@ -776,7 +776,14 @@ def estimate_focal(
                        if why is not None), None)
     if first_flat is None and not good.any():  # refused anyway: named alike if a channel is lost
         first_flat = next(iter(est.rejected.items()), None)
-    lost = _constant_channel(instances) if first_flat else None
+    # Across two or more objects, each in its own NOCS frame, a channel that does not vary is
+    # a lost one even where no object reads flat (seen edge-on, an object's depth shows little
+    # solid, and the frame answered from it at -85%).
+    lost = _constant_channel(instances) if first_flat or len(instances) > 1 else None
+    if lost is not None and first_flat is None:
+        est.reason = (f"{_lost_text(lost)}: a lost channel? the frame is refused (its "
+                      f"{len(instances)} objects all read it)")
+        return est
     if lost is not None:
         # A channel constant over every object is a fault of the whole NOCS image: the objects
         # that are not solid in view are as wrong, only less visibly (frames with one channel
