@@ -253,7 +253,8 @@ def _replayed(focal, rows):
 
 
 def test_frames_that_cannot_tell_a_zoom_do_not_follow_a_scale_step():
-    """Tuning `predicted` sequence 7090 (bench/world_accuracy.py --first-sequence 7000), whose
+    """Tuning `predicted` sequence 7090 at the preset's gain 0.4 (bench/world_accuracy.py
+    --first-sequence 7000), whose
     objects leave the view: after frame 7 only four frames have a focal length, three of them
     +121% to +165% off and saying so (std_rel 77% to 26000%), the fourth -8% at 1800%. Object
     1's image scale is 105 px per NOCS unit while the edge cuts it and 199-211 once it is whole
@@ -283,7 +284,7 @@ def test_frames_that_cannot_tell_a_zoom_do_not_follow_a_scale_step():
 
 
 def test_a_scale_with_one_older_frame_still_judges_a_step():
-    """Tuning `predicted` sequence 7111's first 12 frames (bench/world_accuracy.py
+    """Tuning `predicted` sequence 7111's (gain 0.4) first 12 frames (bench/world_accuracy.py
     --first-sequence 7000): one object, cut by the image's edge in the first four frames (no
     sizes), whose focal error drifts with the view from +10% to -13% (std_rel 7-10%, nearly all
     of it the prior spread) while its extent and radius stay within 2%. The scale has one
@@ -301,7 +302,7 @@ def test_a_scale_with_one_older_frame_still_judges_a_step():
 
 
 def test_a_scale_step_the_newest_frame_takes_back_is_no_zoom():
-    """Tuning `predicted` sequence 7033's first 15 frames (bench/world_accuracy.py
+    """Tuning `predicted` sequence 7033's (gain 0.4) first 15 frames (bench/world_accuracy.py
     --first-sequence 7000): three objects, two of them 7-9 px in radius, whose masks grow and
     shrink by a pixel together (20% of their radius). In frames 12 and 13 both are large and
     the focal lengths 6-8% high: the image radii stepped by 11% at 7 standard errors, and the
