@@ -459,10 +459,11 @@ def _moments_kernel(x, d, p, step, focal, out):
                 out[j, a, b] /= n
 
 
-def _constant_channel(instances, tolerance: float = 0.01):
+def _constant_channel(instances, tolerance: float = 0.01, points: int = 200):
     """(channel, value) of a NOCS channel whose standard deviation over every object's pixels
-    is below ``tolerance`` (a lost channel: an object's own NOCS span 0.1 or more), or None."""
-    p = np.concatenate([inst.p for inst in instances])
+    (every step-th, at most ``points`` per object) is below ``tolerance`` (a lost channel: an
+    object's own NOCS span 0.1 or more), or None."""
+    p = np.concatenate([inst.p[::max(1, -(-len(inst.p) // points))] for inst in instances])
     std = p.std(0)
     c = int(np.argmin(std))
     return (c, float(np.median(p[:, c]))) if std[c] < tolerance else None
