@@ -143,6 +143,27 @@ objects' radii the decentering moves points up to 0.43 px off a pinhole, the tun
 px, and it magnifies an object in proportion to its radius, not its square); its
 principal point and predictor errors are the tuning model's. It judges a term for the lens's
 residual distortion on a lens that term was not shaped on.
+A thirteenth (``variant="heldout12"``, fixed on 25 Nov 2026 before any evaluation on it) errs
+as a depth sensor or network that sees surfaces obliquely, a NOCS head that works on regions of
+interest and a segmenter unsure where an object meets what it stands on, with the tuning
+model's camera (its principal point and its lens): its depth field, in place of every scale of
+the tuning grid, is a relative error proportional to 1 - cos(theta), theta the angle between
+each pixel's true surface normal and its viewing ray (0 facing the camera, 1 edge-on: it grows
+towards each object's rims and is large on the obliquely seen table), scaled to unit rms over
+the objects times a coefficient that drifts as the fields do (random sign; the field's
+strength times that, as the tuning field's); each object's NOCS map is misregistered within its
+mask by a shift of its box's diagonal times half the NOCS field's strength per image axis, a
+Gaussian that drifts as the fields do (a NOCS head pasted into a box a little off the one it
+saw, the mask from elsewhere; sub-pixel to a few pixels, bilinear, the NOCS carried past the
+outline by the nearest pixel's); with per-pixel NOCS noise (a NOCS network: not the ``sensor``
+preset's ground truth), each object's NOCS are what a head that predicts them on a 28x28 grid
+over its box gives, pasted back by nearest neighbour (blocks of the box's size over 28 pixels,
+each the mean of the object's NOCS in it), before the per-pixel noise; and, with mask errors,
+each instance's mask is eroded or dilated by a width drawn anew in every frame in -2..2 times
+the mask width, only where its outline meets the background at its own depth (within 2%: its
+base on the table), not at its occluding contours. Every mechanism is zero-mean as the families
+are (the field's and the shift's signs, the contact width's) except the 28x28 grid, a
+resolution of the pipeline (its error is symmetric within each block).
 """
 from __future__ import annotations
 
@@ -178,11 +199,13 @@ class ErrorFamilies:
     uniform direction in [-1, 1] per axis, kept for the sequence, sub-pixel: the scene is
     rendered through that camera and the frame's ``principal_point`` says where it is). It is
     drawn from a generator of its own, so that the other families' draws stay as they were, and
-    only in the tuning model (``heldout9`` moves it its own way). lens: the camera's residual
+    only in the tuning model, ``heldout11`` and ``heldout12`` (``heldout9`` and ``heldout10``
+    move it their own ways). lens: the camera's residual
     radial distortion after rectification, x (1 + k1 r^2 + k2 r^4) in coordinates normalised by
     the focal length about the principal point, k1 uniform in +-lens and k2 in +-lens / 2, kept
     for the sequence (zero-mean in sign; drawn from a generator of its own, as the principal
-    point; only in the tuning model, ``heldout10`` and ``heldout11`` have lenses of their own).
+    point; only in the tuning model and ``heldout12``, which keeps the tuning camera;
+    ``heldout10`` and ``heldout11`` have lenses of their own).
     """
 
     depth_scale: float = 0.0
@@ -360,16 +383,20 @@ def _lens_row_field(rng, h, w, cells):
 
 
 VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5", "heldout6",
-            "heldout7", "heldout8", "heldout9", "heldout10", "heldout11")
+            "heldout7", "heldout8", "heldout9", "heldout10", "heldout11", "heldout12")
 # heldout7's image fields are the tuning grid's, drawn per segment (ErrorState._segments);
 # heldout8's finer ones are the tuning grid's, grown with depth (ErrorState._grown);
 # heldout9 has no image field: its depth fields are sinusoids fixed in the scene
 # (ErrorState._scene_field), its NOCS distortion a pull towards a ramp (_ramp_pull);
-# heldout10's depth fields are the tuning grid's, its NOCS distortion a bend (_bend).
+# heldout10's depth fields are the tuning grid's, its NOCS distortion a bend (_bend);
+# heldout12 has no image field: its depth field follows the grazing angle
+# (ErrorState._grazing_field), its NOCS distortion a misregistration of each object's
+# NOCS map (_roi_shift).
 _FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field,
            "heldout3": _poly_field, "heldout4": _ring_field, "heldout5": _tile_field,
            "heldout6": _lens_row_field, "heldout7": _grid_field, "heldout8": _grid_field,
-           "heldout9": _grid_field, "heldout10": _grid_field, "heldout11": _grid_field}
+           "heldout9": _grid_field, "heldout10": _grid_field, "heldout11": _grid_field,
+           "heldout12": _grid_field}
 # heldout8's familiar-size cue: the typical size (bounding-box diagonal, m; the geometric mean
 # of SceneSpec's range) and the spread of log sizes that one unit of the field stands for.
 _TYPICAL_SIZE = 0.17
@@ -565,6 +592,25 @@ class ErrorState:
         g[ok] = (np.cos(pts[ok] @ k.T + phase) @ amp) / norm * zref / depth[ok]
         return g
 
+    def _grazing_field(self, rng, frame):
+        """A relative depth error that grows with the grazing angle: 1 - cos(theta), theta the
+        angle between each pixel's true surface normal (from ``frame``'s truth) and its viewing
+        ray (0 where the surface faces the camera, 1 edge-on), over its rms on the objects'
+        pixels, times a coefficient that drifts as the fields do (unit variance; its sign
+        random, so zero-mean over sequences): a depth network or sensor that errs more, and in
+        one direction, the more obliquely it sees a surface (at an object's rims, on the
+        table). Pixels without a normal (a segment one pixel wide) take the objects' median."""
+        b = self._drift("grazing", rng.normal())
+        s = _grazing(frame)
+        ok = np.isfinite(frame.depth)
+        on = ok & (frame.mask > 0) & np.isfinite(s)
+        if on.sum() < 2:
+            on = ok & np.isfinite(s)
+        if on.sum() < 2:
+            return np.zeros(frame.mask.shape)
+        s = np.where(np.isfinite(s), s, np.median(s[on]))
+        return b * np.where(ok, s, 0.0) / max(float(np.sqrt(np.mean(s[on] ** 2))), 1e-9)
+
     def _object(self, iid, rng):
         """Per-object errors: the shape mismatch persists, the relief error drifts slowly."""
         e = self.err
@@ -644,7 +690,10 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         band = cv2.dilate(edge.astype(np.uint8), np.ones((k, k), np.uint8)).astype(bool) & obj
         blurred = cv2.GaussianBlur(nocs.astype(np.float32), (k, k), 0).astype(np.float64)
         nocs[band] = blurred[band]
-    if e.mask_px > 0:
+    if e.mask_px > 0 and state.variant == "heldout12":
+        mask, nocs = _contact_errors(mask, nocs, frame.depth, e.mask_px, rng)
+        obj = mask > 0
+    elif e.mask_px > 0:
         mask, nocs = _mask_errors(mask, nocs, e.mask_px, rng, state.variant, state)
         obj = mask > 0
     scale = state.scale
@@ -676,6 +725,9 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         elif state.variant == "heldout9":
             # Every scale fixed in the scene, additive in metres.
             total = sum(state._scene_field(rng, frame, c) for c in e.field_cells)
+        elif state.variant == "heldout12":
+            # One relative error for every scale, following the grazing angle.
+            total = state._grazing_field(rng, frame) * np.sqrt(len(e.field_cells))
         else:
             total = sum(state._field(("depth", c), rng, h, w, c) for c in e.field_cells)
         depth *= 1.0 + e.field * total / np.sqrt(len(e.field_cells))
@@ -700,6 +752,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             nocs = _ramp_pull(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout10":
             nocs = _bend(nocs, mask, state, rng, e.nocs_field)
+        elif state.variant == "heldout12":
+            nocs = _roi_shift(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout":
             # Scaled to ``nocs_field`` rms on the objects, as the other variants' distortions:
             # unscaled, q^T W q with |q| < 0.5 moved the NOCS 8x less than the tuning field.
@@ -712,6 +766,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
         else:
             for c in range(3):
                 nocs[..., c] += e.nocs_field * state._field(("nocs", c), rng, h, w, 3)
+    if state.variant == "heldout12" and e.nocs_pixel > 0:
+        nocs = _roi_paste(nocs, mask)  # a 28x28 NOCS head's output pasted into each box
     if e.nocs_pixel > 0:
         nocs[obj] += rng.normal(0, e.nocs_pixel, (int(obj.sum()), 3))
     if e.nocs_outliers > 0:
@@ -1099,6 +1155,107 @@ def _bend(nocs, mask, state, rng, rms):
     return out
 
 
+def _grazing(frame):
+    """1 - cos(theta) at each pixel of ``frame``'s truth, theta the angle between its surface
+    normal (:func:`_normals`) and its viewing ray: 0 facing the camera, 1 edge-on; NaN where
+    the normal is."""
+    h, w = frame.depth.shape
+    cx, cy = frame.principal_point
+    vv, uu = np.mgrid[0:h, 0:w]
+    ray = np.stack([(uu - cx) / frame.focal, (vv - cy) / frame.focal, np.ones((h, w))], -1)
+    ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
+    return 1.0 - np.abs(np.sum(_normals(frame) * ray, axis=-1))
+
+
+def _box(m):
+    """(y0, y1, x0, x1) of the pixels ``m``, ends exclusive; None if there are none."""
+    ys, xs = np.nonzero(m)
+    if len(ys) == 0:
+        return None
+    return ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+
+
+def _roi_shift(nocs, mask, state, rng, rms):
+    """Each object's NOCS map moved within its mask by a shift of its box's diagonal times
+    ``rms`` / 2 per image axis (a Gaussian that drifts as the fields do, kept for the sequence
+    without drift): pixel u takes the NOCS of u + shift, bilinearly, the object's NOCS carried
+    out past its outline by the nearest pixel's; the mask stays. A NOCS head that predicts in
+    its region of interest's frame and is pasted into a box a little off the one it saw (box
+    regression jitter), while the mask comes from another head or segmenter: each object's
+    NOCS misregistered against its depth by a few pixels in a random direction."""
+    out = nocs.copy()
+    h, w = mask.shape
+    for iid in np.unique(mask[mask > 0]):
+        m = mask == iid
+        y0, y1, x0, x1 = _box(m)
+        shift = state._drift(("roi_shift", int(iid)), rng.normal(size=2)) * 0.5 * rms * np.hypot(
+            y1 - y0, x1 - x0)
+        pad = int(np.ceil(np.abs(shift).max())) + 2
+        sy, sx = slice(max(y0 - pad, 0), min(y1 + pad, h)), slice(max(x0 - pad, 0),
+                                                                  min(x1 + pad, w))
+        sub = m[sy, sx]
+        _, (iy, ix) = ndimage.distance_transform_edt(~sub, return_indices=True)
+        filled = nocs[sy, sx][iy, ix].astype(np.float32)
+        vv, uu = np.mgrid[0:sub.shape[0], 0:sub.shape[1]].astype(np.float32)
+        moved = cv2.remap(filled, uu + np.float32(shift[0]), vv + np.float32(shift[1]),
+                          cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        out[sy, sx][sub] = moved[sub]
+    return out
+
+
+def _roi_paste(nocs, mask, cells=28):
+    """Each object's NOCS as a NOCS head gives them that predicts them on a ``cells`` x
+    ``cells`` grid over the object's box (each cell the mean over the object's pixels in it,
+    a cell without any the nearest cell's) and is pasted back into the box by nearest
+    neighbour: blocks of the box's size over ``cells`` pixels (none where the box is under
+    ``cells`` pixels across)."""
+    out = nocs.copy()
+    for iid in np.unique(mask[mask > 0]):
+        m = mask == iid
+        y0, y1, x0, x1 = _box(m)
+        sub = m[y0:y1, x0:x1].astype(np.float32)
+        grid = (cells, cells)
+        den = cv2.resize(sub, grid, interpolation=cv2.INTER_AREA)
+        num = cv2.resize(nocs[y0:y1, x0:x1].astype(np.float32) * sub[..., None], grid,
+                         interpolation=cv2.INTER_AREA)
+        has = den > 1e-6
+        small = num / np.maximum(den, 1e-6)[..., None]
+        _, (iy, ix) = ndimage.distance_transform_edt(~has, return_indices=True)
+        small = small[iy, ix]
+        back = cv2.resize(small, (x1 - x0, y1 - y0), interpolation=cv2.INTER_NEAREST)
+        out[y0:y1, x0:x1][m[y0:y1, x0:x1]] = back[m[y0:y1, x0:x1]]
+    return out
+
+
+def _contact_errors(mask, nocs, depth, px, rng, tol=0.02):
+    """Each instance's mask eroded or dilated by a width drawn anew in every frame in
+    -2 ``px``..2 ``px``, but only where its outline meets the background at about its own
+    depth (within ``tol`` of it, from the true ``depth``): where the object stands on the
+    table. Its outline against a farther background stays. Grown pixels keep the table's
+    depth and take the NOCS of the object's nearest pixel; eroded ones leave the instance. A
+    segmenter unsure where an object ends and the surface it touches begins (a base, a
+    contact shadow), sure at an occluding contour."""
+    new = mask.copy()
+    finite = np.isfinite(depth)
+    z = np.where(finite, depth, np.inf)
+    background = (mask == 0) & finite
+    dist_bg, (by, bx) = ndimage.distance_transform_edt(~background, return_indices=True)
+    for iid in np.unique(mask[mask > 0]):
+        m = mask == iid
+        r = int(rng.integers(-2 * px, 2 * px + 1))
+        if r > 0:
+            dist, (iy, ix) = ndimage.distance_transform_edt(~m, return_indices=True)
+            near = z[iy, ix]
+            grow = background & (new == 0) & (dist <= r) & (np.abs(z - near) <= tol * near)
+            new[grow] = iid
+            nocs[grow] = nocs[iy[grow], ix[grow]]
+        elif r < 0:
+            near = z[by, bx]
+            cut = m & finite & (dist_bg <= -r) & (np.abs(near - z) <= tol * z)
+            new[cut] = 0
+    return new, nocs
+
+
 def _id_switch(mask, ids, rng, p=0.05):
     """``mask`` with, at probability ``p``, two of the instances ``ids`` that it shows
     exchanging their ids (a tracker's id switch, for this frame only)."""
@@ -1279,10 +1436,10 @@ def _mask_errors(mask, nocs, px, rng, variant, state=None):
     polygon with holes; ``heldout5``: fill to the convex hull; ``heldout6``: through a 28x28
     mask head; ``heldout7``: by a width kept for the sequence in ``state``, then bleed into
     touching instances; ``heldout8``: grow and cut by a detection box; ``heldout9`` and
-    ``heldout10`` and ``heldout11``: as the tuning variant) each instance by up to
-    ``px``
-    pixels; grown pixels keep the background depth and take the nearest object's NOCS, as a
-    segmentation network's would."""
+    ``heldout10`` and ``heldout11``: as the tuning variant; ``heldout12`` has
+    :func:`_contact_errors` instead) each instance by up to ``px`` pixels; grown pixels keep
+    the background depth and take the nearest object's NOCS, as a segmentation network's
+    would."""
     shape = {"heldout": cv2.MORPH_ELLIPSE, "heldout3": cv2.MORPH_CROSS}.get(variant,
                                                                            cv2.MORPH_RECT)
     new = np.zeros_like(mask)
@@ -1359,7 +1516,7 @@ def world_frames(preset: str | ErrorFamilies, seed: int, n_frames: int = 1,
     objs, f, (centre, up), (w, h) = world_scene(rng, spec, focal, size, objects)
     errors = fam.draw(rng)
     state = ErrorState.start(errors, rng, variant, renew)
-    camera = variant in ("tuning", "heldout11")  # the others' cameras are their own
+    camera = variant in ("tuning", "heldout11", "heldout12")  # the others' are their own
     pp = _principal_point(errors.principal_point if camera else 0.0, seed, w, h)
     undistort = _lens(errors.lens if camera else 0.0, seed, variant)
     out = []
