@@ -758,14 +758,14 @@ def test_the_tuning_world_s_principal_point_leaves_the_centre_and_nothing_else_m
     assert world_frames("only_principal_point", 0, 1).errors.principal_point == 0.02
 
 
-def _heldout10(fam, seed, n=2, **kw):
-    """heldout10's truth (frames of ``seed``) and what it makes of them under the strengths
-    ``fam`` as they are (not drawn), with the state that kept its errors."""
+def _held_out(variant, fam, seed, n=2, **kw):
+    """The error model ``variant``'s truth (frames of ``seed``) and what it makes of them under
+    the strengths ``fam`` as they are (not drawn), with the state that kept its errors."""
     from fcop_ros.synthetic.world import ErrorFamilies, ErrorState, apply_errors, world_frames
 
-    truth = world_frames(ErrorFamilies(), seed, n, "heldout10", **kw).frames
+    truth = world_frames(ErrorFamilies(), seed, n, variant, **kw).frames
     rng = np.random.default_rng(seed)
-    state = ErrorState.start(fam, rng, "heldout10")
+    state = ErrorState.start(fam, rng, variant)
     return truth, [apply_errors(t, state, rng) for t in truth], state
 
 
@@ -832,7 +832,7 @@ def test_tenth_heldout_model_takes_its_images_through_a_distorting_lens():
 
     k1s, gain = [], []
     for seed in range(8):
-        truth, seen, _ = _heldout10(ErrorFamilies(mask_px=3), seed)
+        truth, seen, _ = _held_out("heldout10", ErrorFamilies(mask_px=3), seed)
         fits = [_lens_fit(s, t) for s, t in zip(seen, truth)]
         for cx, cy, k1, resid, pinhole, worst, left in fits:
             assert resid < 0.05 and worst < 0.75 and left < 0.005, (seed, fits)
@@ -859,7 +859,7 @@ def test_tenth_heldout_model_moves_the_principal_point_by_a_gaussian():
 
     z = []
     for seed in range(40):
-        truth, seen, _ = _heldout10(ErrorFamilies(mask_px=3), seed)
+        truth, seen, _ = _held_out("heldout10", ErrorFamilies(mask_px=3), seed)
         h, w = truth[0].mask.shape
         shift = [np.subtract(s.principal_point, t.principal_point) for s, t in zip(seen, truth)]
         np.testing.assert_array_equal(shift[0], shift[1])
@@ -929,7 +929,7 @@ def test_tenth_heldout_model_has_holes_in_its_objects_depth():
 
     shares, overlap = [], []
     for seed in range(8):
-        truth, seen, _ = _heldout10(ErrorFamilies(depth_pixel=1e-12), seed)
+        truth, seen, _ = _held_out("heldout10", ErrorFamilies(depth_pixel=1e-12), seed)
         holes = [np.isnan(s.depth) & np.isfinite(t.depth) for s, t in zip(seen, truth)]
         for t, s, hole in zip(truth, seen, holes):
             assert not np.any(hole & (t.mask == 0))
@@ -960,7 +960,7 @@ def test_tenth_heldout_model_bends_and_tapers_each_objects_nocs():
 
     coef = {}
     for seed in range(8):
-        truth, seen, _ = _heldout10(ErrorFamilies(nocs_field=0.03), seed)
+        truth, seen, _ = _held_out("heldout10", ErrorFamilies(nocs_field=0.03), seed)
         for t, s in zip(truth, seen):
             np.testing.assert_array_equal(s.mask, t.mask)
             for iid in np.unique(t.mask[t.mask > 0]):
@@ -1002,7 +1002,7 @@ def test_tenth_heldout_model_masks_flicker_and_switch_ids():
 
     spans, switched, kept = [], 0, 0
     for seed in range(25):
-        truth, seen, _ = _heldout10(ErrorFamilies(mask_px=3), seed, 8, objects=3)
+        truth, seen, _ = _held_out("heldout10", ErrorFamilies(mask_px=3), seed, 8, objects=3)
         widths, before = {}, {}
         for k, (t, s) in enumerate(zip(truth, seen)):
             wrong = {a: b for a, b in _true_ids(s, t).items() if a != b}
@@ -1109,17 +1109,6 @@ def test_the_tuning_world_and_heldout11_take_their_images_through_a_lens():
         assert max(off) > {"tuning": 0.03, "heldout11": 0.3}[variant], (variant, off)
 
 
-def _heldout12(fam, seed, n=2, **kw):
-    """heldout12's truth (frames of ``seed``) and what it makes of them under the strengths
-    ``fam`` as they are (not drawn), with the state that kept its errors."""
-    from fcop_ros.synthetic.world import ErrorFamilies, ErrorState, apply_errors, world_frames
-
-    truth = world_frames(ErrorFamilies(), seed, n, "heldout12", **kw).frames
-    rng = np.random.default_rng(seed)
-    state = ErrorState.start(fam, rng, "heldout12")
-    return truth, [apply_errors(t, state, rng) for t in truth], state
-
-
 def test_twelfth_heldout_model_errs_with_the_grazing_angle():
     """heldout12, with a depth field (field 0.03): the relative depth error on the objects is
     exactly (within 1e-12) c (1 - cos theta), theta the angle between the true normal and
@@ -1132,7 +1121,7 @@ def test_twelfth_heldout_model_errs_with_the_grazing_angle():
 
     coefs = []
     for seed in range(6):
-        truth, seen, _ = _heldout12(ErrorFamilies(field=0.03, field_drift=0.6), seed)
+        truth, seen, _ = _held_out("heldout12", ErrorFamilies(field=0.03, field_drift=0.6), seed)
         c = []
         for t, s in zip(truth, seen):
             g = _grazing(t)
@@ -1164,7 +1153,7 @@ def test_twelfth_heldout_model_misregisters_each_objects_nocs_map():
 
     shifts = []
     for seed in range(6):
-        truth, seen, state = _heldout12(ErrorFamilies(nocs_field=0.03), seed)
+        truth, seen, state = _held_out("heldout12", ErrorFamilies(nocs_field=0.03), seed)
         for t, s in zip(truth, seen):
             np.testing.assert_array_equal(s.mask, t.mask)
             for iid in np.unique(t.mask[t.mask > 0]):
@@ -1240,7 +1229,7 @@ def test_twelfth_heldout_model_masks_err_only_where_objects_meet_the_table():
 
     grown = cut = changed = total = 0
     for seed in range(8):
-        truth, seen, _ = _heldout12(ErrorFamilies(mask_px=3), seed, 3)
+        truth, seen, _ = _held_out("heldout12", ErrorFamilies(mask_px=3), seed, 3)
         for t, s in zip(truth, seen):
             z = t.depth
             for iid in np.unique(t.mask[t.mask > 0]):

@@ -781,10 +781,6 @@ def estimate_focal(
     # a lost one even where no object reads flat (seen edge-on, an object's depth shows little
     # solid, and the frame answered from it at -85%).
     lost = _constant_channel(instances) if first_flat or len(instances) > 1 else None
-    if lost is not None and first_flat is None:
-        est.reason = (f"{_lost_text(lost)}: a lost channel? the frame is refused (its "
-                      f"{len(instances)} objects all read it)")
-        return est
     if lost is not None:
         # A channel constant over every object is a fault of the whole NOCS image: the objects
         # that are not solid in view are as wrong, only less visibly (frames with one channel
@@ -792,8 +788,9 @@ def estimate_focal(
         # left 5). Any object that reads flat raises the question, also one refused for
         # another reason first (a user's 120 frames: 11 answered when only objects that passed
         # the other checks could, 2 now). One object's flat NOCS refuse only that object.
-        est.reason = (f"{_lost_text(lost)}: a lost channel? the frame is refused (object "
-                      f"{first_flat[0]}: {first_flat[1]})")
+        shown = (f"object {first_flat[0]}: {first_flat[1]}" if first_flat
+                 else f"its {len(instances)} objects all read it")
+        est.reason = f"{_lost_text(lost)}: a lost channel? the frame is refused ({shown})"
         return est
     est.mirrored = [
         inst.instance_id for k, inst in enumerate(support) if good[k] and fits.mirrored[k]

@@ -886,10 +886,10 @@ def _rim_shrink(nocs, mask, state, rng, rms):
 def _mask_head(m, rng):
     """Instance mask m as a 28x28 mask head gives it: its box resampled to 28x28 (area) and
     back (bilinear), thresholded at a level drawn in 0.3-0.7 (the head's bias, per instance)."""
-    ys, xs = np.nonzero(m)
-    if len(ys) == 0:
+    box = _box(m)
+    if box is None:
         return m.astype(np.uint8)
-    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+    y0, y1, x0, x1 = box
     crop = m[y0:y1, x0:x1].astype(np.float32)
     small = cv2.resize(crop, (28, 28), interpolation=cv2.INTER_AREA)
     back = cv2.resize(small, (x1 - x0, y1 - y0), interpolation=cv2.INTER_LINEAR)
