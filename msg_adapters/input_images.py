@@ -36,10 +36,10 @@ class ImageFormatError(ValueError):
     """An Image whose encoding is unsupported for its role, or whose layout is inconsistent."""
 
 
-def image_to_array(msg: Image, supported=None, role: str = "image") -> np.ndarray:
-    """View an Image's pixels as an (H,W) or (H,W,C) array in native byte order (a copy).
-
-    ``supported`` restricts the accepted encodings; ``role`` names the input in errors."""
+def check_image(msg: Image, supported=None, role: str = "image") -> None:
+    """Raise ImageFormatError unless ``msg`` can be read: an encoding among ``supported``, a
+    size, a ``step`` that holds a row and data that hold ``step * height`` bytes. Reads the
+    header only, so it is cheap enough for every message."""
     enc = msg.encoding
     allowed = tuple(supported) if supported is not None else tuple(_LAYOUT)
     if enc not in allowed or enc not in _LAYOUT:
@@ -48,17 +48,27 @@ def image_to_array(msg: Image, supported=None, role: str = "image") -> np.ndarra
         )
     kind, ch = _LAYOUT[enc]
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
-    dt = np.dtype(kind).newbyteorder(">" if msg.is_bigendian else "<")
-    row = w * ch * dt.itemsize
+    row = w * ch * np.dtype(kind).itemsize
     if h == 0 or w == 0:
         raise ImageFormatError(f"{role}: empty image ({w}x{h}, encoding {enc})")
     if row > step:
         raise ImageFormatError(f"{role}: step {step} is shorter than width*channels*size = {row} "
                                f"({w} px, encoding {enc})")
+    if len(msg.data) < step * h:
+        raise ImageFormatError(f"{role}: data has {len(msg.data)} bytes, step*height needs "
+                               f"{step * h} (encoding {enc}, {w}x{h})")
+
+
+def image_to_array(msg: Image, supported=None, role: str = "image") -> np.ndarray:
+    """View an Image's pixels as an (H,W) or (H,W,C) array in native byte order (a copy).
+
+    ``supported`` restricts the accepted encodings; ``role`` names the input in errors."""
+    check_image(msg, supported, role)
+    kind, ch = _LAYOUT[msg.encoding]
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    dt = np.dtype(kind).newbyteorder(">" if msg.is_bigendian else "<")
+    row = w * ch * dt.itemsize
     buf = np.frombuffer(msg.data, dtype=np.uint8)
-    if buf.size < step * h:
-        raise ImageFormatError(f"{role}: data has {buf.size} bytes, step*height needs {step * h} "
-                               f"(encoding {enc}, {w}x{h})")
     rows = buf[: step * h].reshape(h, step)[:, :row]
     arr = np.ascontiguousarray(rows).view(dt).reshape((h, w, ch) if ch > 1 else (h, w))
     return arr.astype(dt.newbyteorder("="), copy=True)

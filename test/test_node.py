@@ -815,3 +815,67 @@ def test_a_problem_under_the_start_up_warning_is_said_too(harness, capfd):
     h.node.publish_diagnostics()
     err = capfd.readouterr().err
     assert err.count("no input for 8.") == 1, err
+
+
+def test_an_unreadable_depth_image_gets_no_camera_info_once_there_is_an_estimate(harness, capfd):
+    """A new user's audit (25 Nov 2026): once a 640x480 estimate existed, a depth Image of that
+    size with no encoding and no data, an rgb8 one, one with data short of step * height got a
+    CameraInfo each (only the size was checked). A depth image the node cannot read gets none,
+    counted as warning_depth_unreadable and said."""
+    h = harness()
+    assert h.frame(frame_messages(clean_frame(1), T0))
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 10)
+    d, n, m = frame_messages(clean_frame(1), T0 + DT)
+    bad = [Image(header=header_from_ns(T0 + DT, d.header.frame_id), width=640, height=480),
+           Image(header=header_from_ns(T0 + 2 * DT, d.header.frame_id), width=640, height=480,
+                 encoding="rgb8", step=1920, data=bytes(640 * 480 * 3)),
+           Image(header=header_from_ns(T0 + 3 * DT, d.header.frame_id), width=640, height=480,
+                 encoding="32FC1", step=2560, data=bytes(100))]
+    for img in bad:
+        h.send((img, n, m), which=(0,))
+    # A readable depth image after them is answered: they had their turn.
+    h.send(frame_messages(clean_frame(1), T0 + 4 * DT), which=(0,))
+    assert spin_until(h.ex, lambda: len(h.info) == 2, 10)
+    assert [stamp_ns(i) for i in h.info.msgs] == [T0, T0 + 4 * DT]
+    assert h.node.counts.warnings["depth_unreadable"] == 3
+    err = capfd.readouterr().err
+    assert "no CameraInfo for an unreadable depth: unsupported encoding ''" in err
+
+
+def test_the_latched_camera_info_is_withdrawn_when_the_gate_closes_on_it(harness):
+    """A new user's audit (25 Nov 2026): after focal_max was lowered below the estimate at run
+    time, /diagnostics said the focal was held back, but a late joiner of ~/latest_camera_info
+    still got it. The latched publication goes when the gate closes on it, and comes back with
+    the next CameraInfo the gate lets out."""
+    h = harness()
+    assert h.frame(frame_messages(clean_frame(1), T0))
+    assert spin_until(h.ex, lambda: len(h.info) == 1, 10)
+    late = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    first = Recorder(h.tester, CameraInfo, "/fcop_node/latest_camera_info", late)
+    assert spin_until(h.ex, lambda: len(first) == 1, 10)
+    focal = first.msgs[0].k[0]
+    assert h.node.set_parameters([Parameter("focal_max", value=focal - 50.0)])[0].successful
+    assert spin_until(h.ex, lambda: h.node.latest is None, 10)
+    again = Recorder(h.tester, CameraInfo, "/fcop_node/latest_camera_info", late)
+    assert spin_until(h.ex, lambda: again.sub.get_publisher_count() == 1, 10)
+    assert not spin_until(h.ex, lambda: len(again) > 0, 1.0)  # nothing latched
+    assert h.node.set_parameters([Parameter("focal_max", value=focal + 50.0)])[0].successful
+    assert h.frame(frame_messages(clean_frame(1), T0 + DT))
+    assert spin_until(h.ex, lambda: len(again) == 1, 10)
+    assert stamp_ns(again.msgs[0]) == T0 + DT
+
+
+def test_a_frame_of_another_frame_id_starts_a_new_window(harness):
+    """The node passes the depth image's frame_id to the tracker (test_tracker has the rule):
+    three frames in one camera frame, then one in another, leave a window of one, counted."""
+    h = harness()
+    for k in range(3):
+        assert h.frame(frame_messages(clean_frame(1), T0 + k * DT))
+    assert len(h.node.window) == 3
+    msgs = frame_messages(clean_frame(1), T0 + 3 * DT)
+    for m in msgs:
+        m.header.frame_id = "other_camera_optical_frame"
+    assert h.frame(msgs)
+    assert len(h.node.window) == 1
+    assert h.node.counts.warnings["frame_id_changed"] == 1

@@ -735,6 +735,19 @@ def test_keep_on_this_machine_sets_only_what_is_unset():
     assert set(env) == set(profile_env_vars()) and all(v.endswith(".xml") for v in env.values())
 
 
+def test_isolated_keeps_a_run_off_the_shells_graph_and_restores_the_shell():
+    from fcop_ros.ros.dds import isolated, ros_distro
+
+    shell = {"ROS_DOMAIN_ID": "0", "ROS_LOCALHOST_ONLY": "1", "ROS_STATIC_PEERS": "10.0.0.2"}
+    env = dict(shell)
+    with isolated(env) as domain:
+        assert env["ROS_DOMAIN_ID"] == str(domain) and 200 <= domain <= 232
+        if ros_distro() not in ("humble", "iron"):
+            assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "OFF"
+            assert "ROS_LOCALHOST_ONLY" not in env and "ROS_STATIC_PEERS" not in env
+    assert env == shell
+
+
 # ----- the calibration file
 
 
@@ -909,30 +922,38 @@ def test_camera_info_output_answers_each_depth_stamp_once_and_the_owed_one_later
     sent = []
 
     def build(focal, w, h, header):
-        if header == "refuse":
+        if getattr(header, "refuse", False):
             raise IntrinsicsRefused("principal_point_outside", "off the image")
         return NS(k=[focal, 0, w / 2, 0, focal, h / 2, 0, 0, 1], width=w, height=h)
 
     out = CameraInfoOutput(sent.append, build)
-    ready = Publishable(600.0, 0.01, 640, 480, WindowEstimate(600.0, 0.01, 300, 4, 4))
-    depth = NS(width=640, height=480, header="h")
+    ready = Publishable(600.0, 0.01, 640, 480, WindowEstimate(600.0, 0.01, 300, 4, 4), "cam")
+    h = NS(frame_id="cam")
+    depth = NS(width=640, height=480, header=h)
     out.answer_depth(1, depth, lambda: None)  # before any estimate: owed
     assert sent == [] and out.latest is None
-    out.answer_owed(1, "h", ready)
-    out.answer_owed(1, "h", ready)  # paid once
+    out.answer_owed(1, h, ready)
+    out.answer_owed(1, h, ready)  # paid once
     assert len(sent) == 1 and out.latest.stamp_ns == 1 and out.latest.frames == 4
     out.answer_depth(1, depth, lambda: ready)  # the same stamp again: answered already
-    out.answer_depth(2, NS(width=320, height=240, header="h"), lambda: ready)  # another size
-    out.answer_depth(3, NS(width=640, height=480, header="refuse"), lambda: ready)
+    out.answer_depth(2, NS(width=320, height=240, header=h), lambda: ready)  # another size
+    # Another camera frame: the window's focal is not this camera's (an audit: it answered).
+    out.answer_depth(2, NS(width=640, height=480, header=NS(frame_id="other")), lambda: ready)
+    out.answer_depth(3, NS(width=640, height=480, header=NS(frame_id="cam", refuse=True)),
+                     lambda: ready)
     assert len(sent) == 1 and out.published == 1
     out.objects(1, ["pose"])
     assert out.latest.objects == ("pose",)
     out.answer_depth(4, depth, lambda: ready)
-    out.answer_owed(2, "h", ready)  # older than a stamp answered since: never out of order
+    out.answer_owed(2, h, ready)  # older than a stamp answered since: never out of order
     assert [s.width for s in sent] == [640, 640] and out.latest.objects == ("pose",)
     # A depth image arriving after a newer one is answered on arrival, as a driver's would be.
     out.answer_depth(3, depth, lambda: ready)
     assert len(sent) == 3 and out.latest.stamp_ns == 3
+    out.withdraw()  # the gate closed on it: the node swapped its latched publisher
+    assert out.latest is None and out.published == 3
+    out.answer_depth(3, depth, lambda: ready)  # answered stamps stay answered
+    assert len(sent) == 3
     out.clear()
     assert out.latest is None
     out.answer_depth(4, depth, lambda: ready)  # after a reset each stamp is answered anew

@@ -459,3 +459,38 @@ def test_a_looped_bag_replays_to_its_end(tmp_path):
     summary = run(tmp_path / "looped", tmp_path / "out", timeout=20.0)
     rows = read_csv(tmp_path / "out" / "estimates.csv")
     assert summary.frames_read == 80 and len(rows) >= 70, (summary, len(rows))
+
+
+def test_an_offline_replay_keeps_off_the_shells_ros_graph(tmp_path):
+    """A new user's audit (25 Nov 2026): a robot publishing /camera/depth on the shell's domain
+    while fcop_replay ran offline on a bag of the same topic names made the replay drop most
+    frames (0 of 60 answered), and received the replay's images. The replay runs on a domain of
+    its own without discovery: every frame answered, none of its images seen outside."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+
+    bag = tiny_bag(tmp_path / "in", frames=40)
+    with ros_context() as (ctx, _):
+        robot = Node("robot", context=ctx)
+        seen = []
+        robot.create_subscription(Image, mb.TOPICS["depth"], seen.append,
+                                  qos_profile_sensor_data)
+        pub = robot.create_publisher(Image, mb.TOPICS["depth"], qos_profile_sensor_data)
+        depth = depth_to_image(np.full((H, W), 0.7, np.float32), "32FC1",
+                               header_from_ns(START, "robot_frame"))
+        robot.create_timer(0.005, lambda: pub.publish(depth))
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(robot)
+        stop = threading.Event()
+        spinner = threading.Thread(target=lambda: [ex.spin_once(0.01) for _ in iter(
+            stop.is_set, True)])
+        spinner.start()
+        try:
+            s = run(bag, tmp_path / "out")
+        finally:
+            stop.set()
+            spinner.join()
+            ex.shutdown()
+            robot.destroy_node()
+    assert s.frames_read == 40 and s.frames_estimated == 40 and not s.dropped, s
+    assert [m.header.frame_id for m in seen if m.header.frame_id != "robot_frame"] == []

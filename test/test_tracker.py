@@ -49,6 +49,33 @@ def test_another_size_starts_a_new_window_only_with_a_focal_of_its_own():
     assert t.add(empty((640, 480)), 5).kept_size is None and t.size == (640, 480)
 
 
+def test_another_frame_id_starts_a_new_window_as_another_size_does():
+    """A new user's audit (25 Nov 2026): one frame in another camera's frame_id joined the
+    window and got a CameraInfo at the old camera's focal, said nowhere. Another frame_id is
+    another camera: a frame of it with a focal of its own starts a new window (said and
+    counted), one without is dropped and the window kept."""
+    from fcop_ros.ros.frame_outcome import frame_outcome
+
+    t = tracker()
+    for k in range(3):
+        t.add(estimate(600.0), k, "cam_a")
+    assert t.publishable.frame_id == "cam_a" and len(t) == 3
+    stray = empty()
+    said = frame_outcome(stray, t.add(stray, 3, "cam_b"), "cam_b")
+    assert not said.kept and said.dropped == {"other_frame_id_no_evidence": 1} and len(t) == 3
+    assert "the window keeps its frames in 'cam_a'" in said.log[0][2]
+    other = estimate(450.0)
+    step = t.add(other, 4, "cam_b")
+    said = frame_outcome(other, step, "cam_b")
+    assert step.reframed_from == "cam_a" and step.resized_from is None and len(t) == 1
+    assert t.publishable.frame_id == "cam_b" and abs(t.publishable.focal - 450.0) < 1e-9
+    assert said.warnings == {"frame_id_changed": 1}
+    assert [e[:2] for e in said.log] == [("warn", "frame_id_changed")]
+    assert "from 'cam_a' to 'cam_b' (another camera?): new focal window" in said.log[0][2]
+    # The same frame_id again: no change.
+    assert t.add(estimate(450.0), 5, "cam_b").reframed_from is None and len(t) == 2
+
+
 def test_a_window_without_evidence_takes_the_next_size_too():
     """A first frame without evidence (a 1x1 test image, a camera still starting) held the
     window's size: every frame of the real size without evidence was then dropped as

@@ -59,7 +59,8 @@ class CameraInfoOutput:
             if self._answers.answered(stamp):
                 return
             ready = publishable()
-            if ready is None or (msg.width, msg.height) != (ready.width, ready.height):
+            if ready is None or (msg.width, msg.height, msg.header.frame_id) != (
+                    ready.width, ready.height, ready.frame_id):
                 self._answers.unanswered(stamp)
                 return
             try:
@@ -93,6 +94,12 @@ class CameraInfoOutput:
         """After a jump back in time: stamps seen before may come again, each answered anew."""
         with self.lock:
             self._answers.forget()
+
+    def withdraw(self) -> None:
+        """The gate closed on the latest publication (the node swapped its latched publisher):
+        no latest estimate until the next one goes out."""
+        with self.lock:
+            self._latest = None
 
     def clear(self) -> None:
         """After a reset: no latest estimate, no objects, every stamp answered anew."""

@@ -4,6 +4,7 @@ point at it, and how to keep a run's DDS traffic on this machine and out of othe
 from __future__ import annotations
 
 import os
+from contextlib import contextmanager
 from importlib import metadata
 
 from .config import config_path
@@ -63,3 +64,34 @@ def keep_on_this_machine(env=None, domain_id: int | None = None) -> dict:
         "ROS_DOMAIN_ID", str(50 + os.getpid() % 150 if domain_id is None else domain_id)
     )
     return env
+
+
+
+@contextmanager
+def isolated(env=None):
+    """While it lasts, ``env`` (default os.environ) has a run whose publishers and subscribers
+    all live in this process (an offline replay) discover no other participant (Jazzy and
+    later; Humble and Iron: this machine only) on a domain of its own from the process id,
+    whatever the shell set, so that a live robot on the shell's domain neither disturbs it
+    nor receives its messages. Yields the domain id; initialise rclpy within it (rcl reads the
+    variables then), with ``rclpy.init(domain_id=...)``. The variables are restored after."""
+    env = os.environ if env is None else env
+    names = ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOCALHOST_ONLY", "ROS_STATIC_PEERS",
+             "ROS_DOMAIN_ID")
+    saved = {k: env.get(k) for k in names}
+    try:
+        if ros_distro() in ("humble", "iron"):
+            env["ROS_LOCALHOST_ONLY"] = "1"
+        else:
+            env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "OFF"
+            env.pop("ROS_LOCALHOST_ONLY", None)  # ahead of the range in Jazzy (above)
+            env.pop("ROS_STATIC_PEERS", None)
+        domain = 200 + os.getpid() % 30  # above the ids people use, within 232
+        env["ROS_DOMAIN_ID"] = str(domain)
+        yield domain
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                env.pop(k, None)
+            else:
+                env[k] = v

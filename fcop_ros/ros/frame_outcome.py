@@ -24,8 +24,9 @@ class FrameOutcome:
     kept: bool
 
 
-def frame_outcome(est, step) -> FrameOutcome:
-    """What FocalEstimate ``est`` and the tracker's :class:`.tracker.TrackStep` ``step`` mean."""
+def frame_outcome(est, step, frame_id: str = "") -> FrameOutcome:
+    """What FocalEstimate ``est`` (of a depth image in ``frame_id``) and the tracker's
+    :class:`.tracker.TrackStep` ``step`` mean."""
     dropped, warnings, log = Counter(), Counter(), []
     w, h = est.image_size
     if est.mirrored:
@@ -37,10 +38,17 @@ def frame_outcome(est, step) -> FrameOutcome:
                     "unaffected; no pose is published for them"))
     if step.kept_size is not None:
         kw, kh = step.kept_size
-        dropped["other_size_no_evidence"] += 1
-        log.append(("warn", "other_size_no_evidence",
-                    f"dropped a {w}x{h} frame without focal evidence ({est.reason}); "
-                    f"the window keeps its {kw}x{kh} frames"))
+        if step.kept_size == (w, h):  # the same size: another camera frame
+            dropped["other_frame_id_no_evidence"] += 1
+            log.append(("warn", "other_frame_id_no_evidence",
+                        f"dropped a frame in {frame_id!r} without focal evidence "
+                        f"({est.reason}); the window keeps its frames in "
+                        f"{step.kept_frame_id!r}"))
+        else:
+            dropped["other_size_no_evidence"] += 1
+            log.append(("warn", "other_size_no_evidence",
+                        f"dropped a {w}x{h} frame without focal evidence ({est.reason}); "
+                        f"the window keeps its {kw}x{kh} frames"))
         return FrameOutcome(dropped, warnings, tuple(log), False)
     if est.focal is None:
         dropped["no_evidence"] += 1
@@ -50,6 +58,11 @@ def frame_outcome(est, step) -> FrameOutcome:
         ow, oh = step.resized_from
         log.append(("info", "resized", f"image size changed from {ow}x{oh} to "
                                         f"{w}x{h}: new focal window"))
+    if step.reframed_from is not None:
+        warnings["frame_id_changed"] += 1
+        log.append(("warn", "frame_id_changed",
+                     f"the depth images' frame_id changed from {step.reframed_from!r} to "
+                     f"{frame_id!r} (another camera?): new focal window"))
     win = step.window_estimate
     if win.changed:
         at = "no focal yet" if win.focal is None else f"{win.focal:.1f} px"

@@ -33,7 +33,8 @@ from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
-from msg_adapters import marker_array, object_poses, pose_array, stamp_ns
+from msg_adapters import (DEPTH_ENCODINGS, ImageFormatError, check_image, marker_array,
+                          object_poses, pose_array, stamp_ns)
 
 from ..core import compiled, estimate_poses
 from .allocator import limit_allocator_arenas
@@ -151,6 +152,10 @@ class FcopNode(Node):
             Node.destroy_node(self)  # the worker has not started
             raise
         self._diag_timer = self._diagnostics_timer()
+        # ~/latest_camera_info holds an estimate until the gate closes on it (a run-time
+        # focal_range or max_uncertainty, a window that lost its focal): then a late joiner must
+        # get nothing. The estimator thread signals it; the executor swaps the publisher.
+        self._withdraw_signal = self.create_guard_condition(self._withdraw_latched)
         self._warn_unknown_overrides()
         self.worker.start()
         self.get_logger().info(
@@ -280,6 +285,8 @@ class FcopNode(Node):
                 self.estimator_options = estimator_options(new)
             if changed & (WINDOW_PARAMETERS | GATE_PARAMETERS):
                 self.tracker.configure(window_options(new), *gate_settings(new))
+                if self.tracker.publishable is None:
+                    self._withdraw_signal.trigger()
         if "diagnostics_period" in changed:
             self.destroy_timer(self._diag_timer)
             self._diag_timer = self._diagnostics_timer()
@@ -346,9 +353,21 @@ class FcopNode(Node):
         for _, msgs in step.sets:
             self._check_frame_ids(msgs)
         for i, stamp, m in step.accepted:
-            if i == 0:
+            if i == 0 and self._readable_depth(m):
                 self.info_out.answer_depth(stamp, m, lambda: self.tracker.publishable)
         self._say(step.log)
+
+    def _readable_depth(self, msg: Image) -> bool:
+        """Whether depth image ``msg`` can be read; one that cannot gets no CameraInfo (its
+        frame, if it matches, is dropped as bad_encoding when estimated), counted and said."""
+        try:
+            check_image(msg, DEPTH_ENCODINGS, "depth")
+        except ImageFormatError as exc:
+            with self._lock:
+                self.ledger.warnings["depth_unreadable"] += 1
+            self._throttle.warn("depth_unreadable", f"no CameraInfo for an unreadable {exc}")
+            return False
+        return True
 
     def _say(self, log) -> None:
         """Log (level 'warn' or 'info', key, line) entries, throttled by key and the line's
@@ -528,12 +547,14 @@ class FcopNode(Node):
         with self._lock:
             if generation is not None and generation != self.worker.generation:
                 return False  # taken before a reset
-            step = self.tracker.add(est, stamp * 1e-9)
+            step = self.tracker.add(est, stamp * 1e-9, depth_msg.header.frame_id)
             self.last_estimate = est
-            said = frame_outcome(est, step)
+            said = frame_outcome(est, step, depth_msg.header.frame_id)
             self.ledger.estimated(est, said, time.perf_counter() - t0)
         self._say(said.log)
         ready = step.ready
+        if ready is None and self.info_out.latest is not None:
+            self._withdraw_signal.trigger()
         if not said.kept or ready is None:
             return False
         # This frame's depth image arrived before there was an estimate: answer it now.
@@ -556,6 +577,18 @@ class FcopNode(Node):
     # ----- services
     def _latched_publisher(self):
         return self.create_publisher(CameraInfo, "~/latest_camera_info", latched_qos())
+
+    def _withdraw_latched(self) -> None:
+        """If the gate has closed on what ~/latest_camera_info holds, a new publisher: late
+        joiners then get nothing, as they would after ~/reset (run by the executor)."""
+        with self.info_out.lock:
+            if self.info_out.latest is None or self.tracker.publishable is not None:
+                return
+            self.destroy_publisher(self.pub_latest)
+            self.pub_latest = self._latched_publisher()
+            self.info_out.withdraw()
+        self._throttle.info("latest_withdrawn", "~/latest_camera_info withdrawn: "
+                            + (self.tracker.held_back() or "no publishable focal"))
 
     def _on_reset(self, request, response):
         with self._lock:

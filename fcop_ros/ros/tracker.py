@@ -23,19 +23,23 @@ class Publishable:
     width: int
     height: int
     window_estimate: object
+    frame_id: str = ""
 
 
 @dataclass(frozen=True)
 class TrackStep:
     """What one frame did to the tracker: the window estimate after it (None if the frame was
     dropped), the publishable estimate, the size the window had before a change of image size
-    (``resized_from``), or the size it kept when a frame of another size came without a focal
-    of its own (``kept_size``: the frame was dropped)."""
+    (``resized_from``) or the frame_id before a change of camera frame (``reframed_from``), or
+    the size and frame_id it kept when a frame of another size or frame_id came without a focal
+    of its own (``kept_size``, ``kept_frame_id``: the frame was dropped)."""
 
     window_estimate: object | None
     ready: Publishable | None
     resized_from: tuple | None = None
     kept_size: tuple | None = None
+    reframed_from: str | None = None
+    kept_frame_id: str | None = None
 
 
 def light(est):
@@ -48,9 +52,9 @@ def light(est):
 class FocalTracker:
     """A FocalWindow with what the node adds around it.
 
-    - The window holds frames of one image size: a frame of another size starts a new window if
-      it has a focal of its own, and is dropped otherwise (a window without a focal takes any
-      size).
+    - The window holds frames of one image size and one frame_id (one camera): a frame of
+      another size or frame_id starts a new window if it has a focal of its own, and is dropped
+      otherwise (a window without a focal takes any).
     - The frames since the window's last restart are kept (light), as many as the largest
       ``max_frames`` so far, so that new window settings re-evaluate them and a window shrunk
       and grown again gets its frames back.
@@ -60,6 +64,7 @@ class FocalTracker:
 
     def __init__(self, window_options, max_uncertainty: float, focal_range: tuple):
         self.size: tuple | None = None  # (width, height) of the frames in the window
+        self.frame_id: str | None = None  # their depth images' frame_id
         self.publishable: Publishable | None = None
         self._history: deque = deque()
         self._history_cap = 0
@@ -91,20 +96,24 @@ class FocalTracker:
         """Why the window's focal does not go out now ('' when it does)."""
         return held_back(self.window.current, self._max_uncertainty, self._focal_range)
 
-    def add(self, est, t: float) -> TrackStep:
-        """Add one frame's FocalEstimate ``est`` (of its ``image_size``) at ``t`` (seconds)."""
+    def add(self, est, t: float, frame_id: str = "") -> TrackStep:
+        """Add one frame's FocalEstimate ``est`` (of its ``image_size``, its depth image in
+        ``frame_id``) at ``t`` (seconds)."""
         size = tuple(est.image_size)
-        resized = None
-        if self.size != size:
+        resized = reframed = None
+        if self.size != size or self.frame_id != frame_id:
             if est.focal is None and self.size is not None and self.window.rated:
-                return TrackStep(None, self.publishable, kept_size=self.size)
-            resized, self.size = self.size, size
-            if resized is not None:
+                return TrackStep(None, self.publishable, kept_size=self.size,
+                                 kept_frame_id=self.frame_id)
+            if self.size is not None:
+                resized = self.size if self.size != size else None
+                reframed = self.frame_id if self.frame_id != frame_id else None
                 self.window.reset()
                 self._history.clear()
+            self.size, self.frame_id = size, frame_id
         win = self._add(light(est), t)
         self._gate(win)
-        return TrackStep(win, self.publishable, resized_from=resized)
+        return TrackStep(win, self.publishable, resized_from=resized, reframed_from=reframed)
 
     def reset(self) -> None:
         """Forget every frame (the image size stays until a frame of another size comes)."""
@@ -133,5 +142,6 @@ class FocalTracker:
             self.publishable = None
         else:
             self.publishable = Publishable(
-                float(win.focal), float(win.std_rel), self.size[0], self.size[1], win
+                float(win.focal), float(win.std_rel), self.size[0], self.size[1], win,
+                self.frame_id or ""
             )

@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..ros.dds import use_large_image_profile
+from ..ros.dds import isolated, use_large_image_profile
 from ..ros.spin import shut_down, spin_until as spin
 from .bagio import BagError, BagSource, BagWriter, error_text, not_a_bag_of, remove_bag
 from .estimates_csv import EstimatesCsv, not_an_estimates_csv
@@ -207,7 +207,8 @@ def replay(
     }
 
     ctx = Context()
-    rclpy.init(context=ctx, args=[])
+    with isolated() as domain:  # an offline replay keeps off the shell's ROS graph
+        rclpy.init(context=ctx, args=[], domain_id=domain)
     t0 = time.perf_counter()
     sent = 0
 
