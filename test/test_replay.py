@@ -203,7 +203,7 @@ def test_unsupported_encoding_and_no_matching_frames(tmp_path, capsys):
     bag2 = _bag_of(tmp_path / "nomatch", frames)
     assert rp.main([str(bag2)] + args) == 1
     err = capsys.readouterr()
-    assert "no frame was estimated" in err.err
+    assert "no frame gave a focal length: the three topics never matched" in err.err
     assert "frames answered   0 with a CameraInfo" in err.out
 
 

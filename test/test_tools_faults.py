@@ -173,6 +173,14 @@ def test_estimates_held_back_are_said_with_the_hint(bag, tmp_path, capsys):
     assert "never matched" not in line
     assert "held back by max_uncertainty" in line and "-p max_uncertainty:=" in line
     assert "5 of 5" in line
+    # The value offered lies just above the std_rel said (an audit: 0.2 offered at 0.0132,
+    # where the default 0.05 would already publish), and publishes.
+    import re
+    std = float(re.search(r"std_rel ([0-9.]+) above", line).group(1))
+    offered = re.search(r"-p max_uncertainty:=([0-9.e-]+)", line).group(1)
+    assert std < float(offered) <= 2 * std, line
+    assert rp.main([str(bag), *topics("--out", str(tmp_path / "o2"), "-p",
+                                      f"max_uncertainty:={offered}")]) == 0
 
 
 # 5. A damaged bag: one line on stderr, saying where.

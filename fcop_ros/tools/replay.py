@@ -16,6 +16,7 @@ then every -p NAME:=VALUE; unknown names and invalid values are refused before a
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 from .bagio import BagError
@@ -232,12 +233,20 @@ def _nothing_published(summary: ReplaySummary) -> str:
     """Why no CameraInfo came out: estimates held back by the publish gate (with the option
     that lets them through), else topics that never matched or gave no evidence."""
     if not summary.held_back:
-        return ("no frame was estimated: the three topics never matched or gave no evidence "
-                "(see 'dropped input')")
+        return ("no frame gave a focal length: the three topics never matched, or their frames "
+                "gave no evidence (see 'dropped input')")
+    std = re.search(r"std_rel ([0-9.eE+-]+) above", summary.held_reason)
     if "focal_range" in summary.held_reason:
         hint = "-p focal_min:=... / -p focal_max:=... if the camera's focal lies outside"
+    elif std:
+        # Just above the last estimate's std_rel, in two significant digits (the default 0.05).
+        above = float(f"{float(std.group(1)) * 1.2:.1g}") if float(std.group(1)) > 0 else 0.05
+        while above <= float(std.group(1)):
+            above *= 1.5
+        hint = (f"-p max_uncertainty:={float(f'{above:.2g}'):g} (or higher) to publish "
+                "estimates that uncertain")
     else:
-        hint = "-p max_uncertainty:=0.2 (or higher) to publish less certain estimates"
+        hint = "-p max_uncertainty:=... (default 0.05) higher to publish less certain estimates"
     return (f"no CameraInfo published: {summary.held_back} of {summary.frames_read} frames "
             "were estimated but held back by max_uncertainty / focal_range (the last: "
             f"{summary.held_reason}); try {hint}")
