@@ -578,14 +578,19 @@ class FcopNode(Node):
     def _latched_publisher(self):
         return self.create_publisher(CameraInfo, "~/latest_camera_info", latched_qos())
 
+    def _renew_latched(self) -> None:
+        """A new ~/latest_camera_info publisher in place of the old (under info_out's lock):
+        late joiners get nothing from before it."""
+        self.destroy_publisher(self.pub_latest)
+        self.pub_latest = self._latched_publisher()
+
     def _withdraw_latched(self) -> None:
         """If the gate has closed on what ~/latest_camera_info holds, a new publisher: late
         joiners then get nothing, as they would after ~/reset (run by the executor)."""
         with self.info_out.lock:
             if self.info_out.latest is None or self.tracker.publishable is not None:
                 return
-            self.destroy_publisher(self.pub_latest)
-            self.pub_latest = self._latched_publisher()
+            self._renew_latched()
             self.info_out.withdraw()
         self._throttle.info("latest_withdrawn", "~/latest_camera_info withdrawn: "
                             + (self.tracker.held_back() or "no publishable focal"))
@@ -595,9 +600,8 @@ class FcopNode(Node):
             self._reset_locked()
             self.intake.reset()
             self.last_estimate = None
-        with self.info_out.lock:  # a new publisher: late joiners get nothing from before it
-            self.destroy_publisher(self.pub_latest)
-            self.pub_latest = self._latched_publisher()
+        with self.info_out.lock:
+            self._renew_latched()
             # In the same step: a frame taken before the reset finds its stamp gone.
             self.info_out.clear()
         response.success = True
