@@ -769,6 +769,18 @@ def _held_out(variant, fam, seed, n=2, **kw):
     return truth, [apply_errors(t, state, rng) for t in truth], state
 
 
+def _objects_of_kept_masks(variant, fam, seeds):
+    """Each true object of the frames of ``seeds`` under the error model ``variant`` at the
+    strengths ``fam``, whose masks it keeps (checked): (seed, the truth's frame, the frame seen,
+    the error state, the instance id, its mask)."""
+    for seed in seeds:
+        truth, seen, state = _held_out(variant, fam, seed)
+        for t, s in zip(truth, seen):
+            np.testing.assert_array_equal(s.mask, t.mask)
+            for iid in np.unique(t.mask[t.mask > 0]):
+                yield seed, t, s, state, iid, t.mask == iid
+
+
 def _true_ids(seen, truth):
     """Each instance id of ``seen`` and the true instance of which it covers the largest share
     (0 where under half of its pixels show an object: a spurious blob)."""
@@ -959,20 +971,16 @@ def test_tenth_heldout_model_bends_and_tapers_each_objects_nocs():
     from fcop_ros.synthetic.world import ErrorFamilies
 
     coef = {}
-    for seed in range(8):
-        truth, seen, _ = _held_out("heldout10", ErrorFamilies(nocs_field=0.03), seed)
-        for t, s in zip(truth, seen):
-            np.testing.assert_array_equal(s.mask, t.mask)
-            for iid in np.unique(t.mask[t.mask > 0]):
-                m = t.mask == iid
-                inside = ((s.nocs[m] > 0) & (s.nocs[m] < 1)).all(1)  # not clipped
-                q, move = t.nocs[m][inside] - 0.5, (s.nocs[m] - t.nocs[m])[inside]
-                a = np.block([[q[:, 1:2] ** 2, q[:, 1:2] * q[:, :1]],
-                              [np.zeros((len(q), 1)), q[:, 1:2] * q[:, 2:]]])
-                bc, *_ = np.linalg.lstsq(a, np.concatenate([move[:, 0], move[:, 2]]), rcond=None)
-                assert np.abs(a @ bc - np.concatenate([move[:, 0], move[:, 2]])).max() < 1e-12
-                assert np.abs(move[:, 1]).max() == 0.0
-                coef.setdefault((seed, int(iid)), []).append(bc)
+    for seed, t, s, _, iid, m in _objects_of_kept_masks(
+            "heldout10", ErrorFamilies(nocs_field=0.03), range(8)):
+        inside = ((s.nocs[m] > 0) & (s.nocs[m] < 1)).all(1)  # not clipped
+        q, move = t.nocs[m][inside] - 0.5, (s.nocs[m] - t.nocs[m])[inside]
+        a = np.block([[q[:, 1:2] ** 2, q[:, 1:2] * q[:, :1]],
+                      [np.zeros((len(q), 1)), q[:, 1:2] * q[:, 2:]]])
+        bc, *_ = np.linalg.lstsq(a, np.concatenate([move[:, 0], move[:, 2]]), rcond=None)
+        assert np.abs(a @ bc - np.concatenate([move[:, 0], move[:, 2]])).max() < 1e-12
+        assert np.abs(move[:, 1]).max() == 0.0
+        coef.setdefault((seed, int(iid)), []).append(bc)
     for bc in coef.values():
         np.testing.assert_allclose(bc[0], bc[-1], atol=1e-12)
         assert abs(bc[0][0]) <= 0.36 and abs(bc[0][1]) <= 0.18, bc
@@ -1152,26 +1160,22 @@ def test_twelfth_heldout_model_misregisters_each_objects_nocs_map():
     from fcop_ros.synthetic.world import ErrorFamilies
 
     shifts = []
-    for seed in range(6):
-        truth, seen, state = _held_out("heldout12", ErrorFamilies(nocs_field=0.03), seed)
-        for t, s in zip(truth, seen):
-            np.testing.assert_array_equal(s.mask, t.mask)
-            for iid in np.unique(t.mask[t.mask > 0]):
-                m = t.mask == iid
-                ys, xs = np.nonzero(m)
-                diag = np.hypot(np.ptp(ys) + 1, np.ptp(xs) + 1)
-                shift = state.fields[("roi_shift", int(iid))] * 0.5 * 0.03 * diag
-                r = int(np.ceil(np.abs(shift).max())) + 2
-                inner = cv2.erode(m.astype(np.uint8), np.ones((2 * r + 1,) * 2, np.uint8),
-                                  borderType=cv2.BORDER_CONSTANT, borderValue=0)
-                v, u = np.nonzero(inner)
-                if len(v) < 20:
-                    continue
-                want = np.stack([ndimage.map_coordinates(t.nocs[..., c],
-                                                         [v + shift[1], u + shift[0]], order=1)
-                                 for c in range(3)], -1)
-                assert np.abs(s.nocs[v, u] - want).max() < 1e-5, (seed, iid)
-                shifts.append(shift / diag)
+    for seed, t, s, state, iid, m in _objects_of_kept_masks(
+            "heldout12", ErrorFamilies(nocs_field=0.03), range(6)):
+        ys, xs = np.nonzero(m)
+        diag = np.hypot(np.ptp(ys) + 1, np.ptp(xs) + 1)
+        shift = state.fields[("roi_shift", int(iid))] * 0.5 * 0.03 * diag
+        r = int(np.ceil(np.abs(shift).max())) + 2
+        inner = cv2.erode(m.astype(np.uint8), np.ones((2 * r + 1,) * 2, np.uint8),
+                          borderType=cv2.BORDER_CONSTANT, borderValue=0)
+        v, u = np.nonzero(inner)
+        if len(v) < 20:
+            continue
+        want = np.stack([ndimage.map_coordinates(t.nocs[..., c],
+                                                 [v + shift[1], u + shift[0]], order=1)
+                         for c in range(3)], -1)
+        assert np.abs(s.nocs[v, u] - want).max() < 1e-5, (seed, iid)
+        shifts.append(shift / diag)
     shifts = np.array(shifts)
     assert np.abs(shifts).max() < 0.06, shifts
     assert (shifts.min(0) < -0.005).all() and (shifts.max(0) > 0.005).all(), shifts
