@@ -229,6 +229,30 @@ def test_truncated_mcap_keeps_what_came_before(tmp_path, capsys):
     assert sum(t == "/fcop/camera_info" for t, _, _ in msgs) == len(rows)
 
 
+def test_ctrl_c_inside_a_read_is_an_interruption_not_damage(tmp_path, capsys, monkeypatch):
+    """CI on 25 Nov 2026: Ctrl-C at 0.8 s landed inside rclpy's deserialisation, which pybind11
+    turned into "Unable to convert ..." with the KeyboardInterrupt as its context, and the
+    replay said "bag damaged" (exit 3). Any read error that came of Ctrl-C ends it as Ctrl-C."""
+    bag = tiny_bag(tmp_path / "in", frames=6)
+    real = BagSource.messages
+
+    def interrupted_after_three(self, topics):
+        for k, item in enumerate(real(self, topics)):
+            if k == 3:
+                try:
+                    raise KeyboardInterrupt
+                except KeyboardInterrupt:
+                    raise TypeError("Unable to convert function return value to a Python type")
+            yield item
+
+    monkeypatch.setattr(BagSource, "messages", interrupted_after_three)
+    code = rp.main([str(bag), "--depth-topic", mb.TOPICS["depth"], "--nocs-topic",
+                    mb.TOPICS["nocs"], "--mask-topic", mb.TOPICS["mask"], "--out",
+                    str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 130 and "interrupted after" in err and "damaged" not in err, err
+
+
 def test_damaged_sqlite_is_a_clear_error(tmp_path, capsys):
     bag = tiny_bag(tmp_path / "in", frames=3, storage="sqlite3")
     f = next(bag.glob("*.db3"))

@@ -19,6 +19,7 @@ from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import Stores, get_typestore
 
 from ..ros.dds import ros_distro
+from .cli import raise_ctrl_c
 
 STORAGES = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}
 COMPRESSIONS = ("none", "zstd")
@@ -182,6 +183,7 @@ class BagSource:
             for c in reader.connections:
                 self.counts[c.topic] = self.counts.get(c.topic, 0) + c.msgcount
         except Exception as exc:  # rosbags raises several types for damaged metadata or storage
+            raise_ctrl_c(exc)
             why = " ".join(f"{type(exc).__name__}: {exc}".split())
             mcaps = sorted(self.path.glob("*.mcap"))
             if not mcaps:
@@ -228,6 +230,7 @@ class BagSource:
                             n += 1
                             yield topic, msgtype, rec.log_time, rec.data
                 except Exception as exc:  # the damage: stop here, say where
+                    raise_ctrl_c(exc)
                     pos, size = fh.tell(), file.stat().st_size
                     at = f"its end, byte {size}" if pos >= size else f"byte {pos} of {size}"
                     self.damaged = (f"{file.name} unreadable after its {n} messages, at {at} "

@@ -29,3 +29,12 @@ def from_ctrl_c(exc: BaseException) -> bool:
         seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
     return False
+
+
+def raise_ctrl_c(exc: BaseException) -> None:
+    """Raise KeyboardInterrupt, from ``exc``, where ``exc`` came of Ctrl-C (:func:`from_ctrl_c`):
+    a handler that takes any error for a damaged bag must not take an interrupted read for one
+    (Ctrl-C inside rclpy's deserialisation surfaces as pybind11's TypeError or RuntimeError,
+    "Unable to convert ...", and a replay said "bag damaged")."""
+    if from_ctrl_c(exc):
+        raise KeyboardInterrupt from exc

@@ -10,6 +10,7 @@ from pathlib import Path
 from ..ros.dds import isolated, use_large_image_profile
 from ..ros.spin import shut_down, spin_until as spin
 from .bagio import BagError, BagSource, BagWriter, error_text, not_a_bag_of, remove_bag
+from .cli import raise_ctrl_c
 from .estimates_csv import EstimatesCsv, not_an_estimates_csv
 from .replay_base import (
     IMAGE_TYPE,
@@ -56,7 +57,8 @@ def _check_encodings(source: BagSource, inputs: dict, decode) -> None:
                 return
             except (ReplayError, BagError):
                 raise
-            except Exception:  # noqa: BLE001 - damage: the replay reports it
+            except Exception as exc:  # damage: the replay reports it
+                raise_ctrl_c(exc)
                 return
             if topic in left:
                 left.discard(topic)
@@ -339,6 +341,7 @@ def replay(
         except (ReplayError, BagError):
             raise
         except Exception as exc:  # a damaged or truncated bag: keep what came before
+            raise_ctrl_c(exc)
             source.damaged = f"unreadable after {sent} image messages ({error_text(exc)})"
         drain()
         _note_held_back(node, summary, processed)

@@ -12,6 +12,7 @@ from ..ros.dds import use_large_image_profile
 from ..ros.sync import RESET_AFTER
 from ..ros.topics import INPUTS
 from .bagio import BagSource
+from .cli import raise_ctrl_c
 from .replay_base import (IMAGE_TYPE, ReplayError, check_distinct, check_not_empty,
                           check_topics)
 
@@ -86,6 +87,7 @@ def _readable(source: BagSource, topics):
         except StopIteration:
             return
         except Exception as exc:  # a damaged storage read through rosbags: stop here, say why
+            raise_ctrl_c(exc)
             source.damaged = source.damaged or f"{type(exc).__name__}: {exc}"
             return
         yield item
