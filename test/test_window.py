@@ -283,6 +283,51 @@ def test_frames_that_cannot_tell_a_zoom_do_not_follow_a_scale_step():
     assert w.changes == 0 and abs(np.log(r.focal / 488.2)) < 0.03
 
 
+def test_a_lone_objects_view_dependent_errors_are_no_zoom():
+    """Two static single-object sequences of the tenth held-out model (bench/world_accuracy.py
+    --heldout10), where the window restarted: `sensor` 1065001, whose last three frames erred
+    +4.5%, +11.1% and +9.0% at a stated 5.3%, 3.1% and 2.7% (prior 5.2%, 2.6%, 2.5%, noise
+    0.5%), and `predicted` 1065024, whose error drifted from -9% to +6% with the view at a
+    stated 7-10% (prior 7%) while the camera's distance moved the object's image scale the other
+    way. The prior part renews with the view, so it does not cancel between the segments of a
+    split: counted in each segment's floor, neither is a zoom (the restart had left the first at
+    +7.1%, at a stated 3.6%)."""
+    sensor = [(-0.27, 0.88, 0.04, 0.04, 59.78, 99.83), (0.01, 0.91, 0.01, 0.01, 59.49, 99.61),
+              (-0.04, 0.92, 0.01, 0.01, 56.57, 94.24), (-0.06, 1.06, 0.01, 0.0, 56.63, 94.37),
+              (-0.01, 0.87, 0.01, 0.01, 57.94, 95.94), (0.1, 0.72, 0.02, 0.01, 59.77, 98.95),
+              (-0.06, 1.09, 0.01, 0.01, 60.29, 98.59), (-0.03, 0.88, 0.01, 0.01, 58.47, 95.75),
+              (-0.04, 0.8, 0.01, 0.01, 60.08, 98.69), (2.43, 5.13, 0.23, 3.86, 58.06, 95.97),
+              (-0.0, 0.69, 0.01, 0.02, 59.41, 97.21), (0.48, 0.59, 0.06, 0.08, 60.56, 98.89),
+              (2.49, 3.7, 0.19, 2.31, 59.37, 96.69), (0.15, 0.25, 0.02, 0.01, 61.87, 100.32),
+              (0.0, 0.29, 0.01, 0.01, 58.27, 94.89), (-0.02, 0.39, 0.01, 0.02, 57.77, 93.44),
+              (-0.01, 0.3, 0.01, 0.01, 60.06, 97.28), (-0.01, 0.28, 0.01, 0.04, 57.73, 93.68),
+              (-0.0, 0.22, 0.01, 0.06, 57.0, 92.67), (-0.01, 0.47, 0.01, 0.02, 56.99, 92.48),
+              (-0.02, 0.44, 0.01, 0.02, 56.32, 91.5), (-5.04, 5.13, 0.36, 4.66, 58.48, 95.09),
+              (-4.93, 1.05, 0.5, 0.51, 59.32, 96.5), (-3.27, 3.11, 0.23, 2.59, 60.49, 98.89),
+              (-0.05, 0.62, 0.01, 0.01, 59.09, 96.69), (-4.99, 1.1, 0.47, 0.8, 59.24, 97.02),
+              (0.02, 0.71, 0.01, 0.02, 58.06, 95.85), (4.53, 5.3, 0.35, 5.18, 59.07, 97.98),
+              (11.07, 3.12, 0.53, 2.59, 58.36, 97.11), (8.96, 2.68, 0.55, 2.49, 59.19, 98.83)]
+    predicted = [
+        (-9.08, 10.43, 0.79, 7.43, 125.65, 68.74), (-9.94, 9.33, 0.68, 7.49, 126.87, 68.81),
+        (-11.06, 9.88, 0.65, 7.48, 126.49, 68.62), (-8.72, 8.19, 0.67, 7.44, 124.96, 68.53),
+        (-9.66, 8.59, 0.64, 7.41, 124.92, 69.62), (-8.16, 8.29, 0.67, 7.41, 125.03, 70.01),
+        (-5.27, 9.02, 0.62, 7.31, 121.91, 69.3), (-6.62, 7.92, 0.67, 7.36, 122.27, 69.67),
+        (-6.69, 7.98, 0.57, 7.32, 120.99, 70.06), (-7.51, 9.18, 0.74, 7.26, 125.87, 73.22),
+        (-8.71, 8.49, 0.73, 7.26, 131.46, 77.43), (-7.08, 11.55, 0.78, 7.19, 138.35, 81.91),
+        (-2.33, 10.34, 0.8, 7.1, 132.68, 76.54), (1.75, 8.63, 0.84, 7.06, 124.28, 72.23),
+        (0.68, 9.28, 0.8, 7.04, 116.59, 67.7), (2.82, 8.87, 0.95, 7.01, 108.81, 64.04),
+        (5.94, 9.23, 0.93, 6.93, 104.02, 61.9), (5.79, 8.17, 1.15, 6.94, 95.97, 57.59),
+        (6.01, 7.21, 1.22, 6.91, 90.68, 54.39)]
+    errors = []
+    for focal, rows in ((670.6, sensor), (1063.0, predicted)):
+        w, r = _replayed(focal, [row[:4] + ([row[4]], [row[5]]) for row in rows])
+        assert w.changes == 0, focal
+        errors.append(abs(np.log(r.focal / focal)))
+        assert errors[-1] <= 2 * r.std_rel, (focal, r.focal, r.std_rel)
+    # Measured: sensor 0.02%; predicted 5.7% at a stated 7.2%.
+    assert errors[0] < 0.001
+
+
 def test_a_scale_with_one_older_frame_still_judges_a_step():
     """Tuning `predicted` sequence 7111's (gain 0.4) first 12 frames (bench/world_accuracy.py
     --first-sequence 7000): one object, cut by the image's edge in the first four frames (no

@@ -33,7 +33,9 @@ least ``change_frames`` on each side), the difference of the two medians (of an 
 its middle frame nearer the other segment) is compared with its standard error from the frames'
 spread about the two medians, widened for slow drift (persistent error cancels in the
 difference), or from what of the frames' own variance does not cancel, where that is larger:
-their noise, and one segment's systematic budget beyond the other's. When it exceeds both
+their noise, their prior part (errors that change with the view: a lone object's frames that
+erred +9% for three frames at a stated 3%, nearly all of it prior, were a zoom) and one
+segment's systematic budget beyond the other's. When it exceeds both
 ``change_sigma`` standard errors and ``change_threshold`` (relative), the older frames are
 dropped (or kept at the new focal length, below).
 
@@ -272,13 +274,16 @@ class FocalWindow:
             return False, None
         sigma, least = self.options.change_sigma, np.log1p(self.options.change_threshold)
 
+        prior = np.array([f.prior for f in rated])
+
         def floor(c):
             # A few frames that err as much as they say they may are no step. The systematic
             # budget both segments share (the same objects in the same scene) cancels in their
-            # difference; their noise and one segment's budget beyond the other's do not.
+            # difference; their noise, their prior part (errors that change with the view, so
+            # the two segments' differ) and one segment's budget beyond the other's do not.
             b_old, b_new = np.median(v[:c] - noise[:c]), np.median(v[c:] - noise[c:])
-            return (float(np.median(noise[:c]) + max(b_old - b_new, 0.0)),
-                    float(np.median(noise[c:]) + max(b_new - b_old, 0.0)))
+            return (float(np.median(noise[:c]) + np.median(prior[:c]) + max(b_old - b_new, 0.0)),
+                    float(np.median(noise[c:]) + np.median(prior[c:]) + max(b_new - b_old, 0.0)))
 
         # The image scale, from the objects' extents and from their image radii alone: a zoom
         # moves both; a depth network whose scale changes from frame to frame scatters the
