@@ -232,6 +232,18 @@ def test_intake_measures_the_late_inputs_delay_and_says_the_queue_size_it_needs(
                                      "queue_size must be above 7.5")
 
 
+def test_intake_names_the_input_the_late_one_came_after():
+    """A hostile user's trial: the advice named the input whose rate it used ('mask comes 26 ms
+    after the nocs', of a mask logged with its NOCS), not the one that came first. Depth, mask
+    100 ms later and NOCS 250 ms later, all at 30 Hz: NOCS is 250 ms after the depth."""
+    intake = Intake(StampSynchronizer(3, queue_size=5), INPUT_NAMES)
+    events = sorted((k / 30 + late, i, 10 * SEC + k * FRAME_DT)
+                    for k in range(60) for i, late in ((0, 0.0), (2, 0.1), (1, 0.25)))
+    _steps(None, [(i, t, now) for now, i, t in events], intake)
+    assert intake.queue_advice() == ("nocs comes 250 ms after the depth of its stamp, at 30 Hz: "
+                                     "queue_size must be above 7.5")
+
+
 def test_intake_forgets_a_delay_once_the_input_comes_first():
     """A newcomer's review: an input late once kept its old delay when it later came first
     for its stamps, so the advice quoted a delay that no longer held."""

@@ -65,6 +65,7 @@ class Intake:
         # until known).
         self._when: list = [{} for _ in self.inputs]
         self._lag: list = [None] * len(self.inputs)
+        self._after: list = list(range(len(self.inputs)))  # the input each one's lag is after
         self._first: float | None = None  # clock time of the first message of any input
 
     def _note_arrival(self, index: int, stamp: int, now: float) -> None:
@@ -80,12 +81,14 @@ class Intake:
             if j == index:
                 continue
             if stamp in other:
-                first.append(other[stamp])
+                first.append((other[stamp], j))
             elif slop > 0:  # approximate matching: the nearest recent stamps
-                first += [t for s, t in islice(reversed(other.items()), 16)
+                first += [(t, j) for s, t in islice(reversed(other.items()), 16)
                           if abs(s - stamp) <= slop]
         # First of its stamp: on time now, whatever it was before.
-        self._lag[index] = now - min(first) if first else 0.0
+        t, j = min(first) if first else (now, index)
+        self._lag[index] = now - t
+        self._after[index] = j
 
     def reset(self) -> None:
         """A fresh start of the synchroniser (its clocks too): no frame has matched since. The
@@ -126,12 +129,14 @@ class Intake:
         if not late:
             return ""
         lag, i = max(late, key=lambda item: (round(item[0], 3), -item[1]))
-        rate, j = max((self._rate(j), j) for j in range(len(self.inputs)) if j != i)
+        # The others queue that long at their fastest rate.
+        rate = max(self._rate(j) for j in range(len(self.inputs)) if j != i)
         need = lag * rate
         if need < self.sync.queue_size:
             return ""
-        return (f"{self.inputs[i]} comes {lag * 1000:.0f} ms after the {self.inputs[j]} of its "
-                f"stamp, at {rate:.0f} Hz: queue_size must be above {need:.1f}")
+        return (f"{self.inputs[i]} comes {lag * 1000:.0f} ms after the "
+                f"{self.inputs[self._after[i]]} of its stamp, at {rate:.0f} Hz: queue_size must "
+                f"be above {need:.1f}")
 
     def _waiting_hint(self, waiting, now: float) -> str:
         """Why the queued messages find nothing to match: inputs that never sent or stopped
