@@ -15,11 +15,16 @@ from fcop_ros.tools import make_bag as mb
 from fcop_ros.tools import nocs_eval as ne
 from fcop_ros.tools import replay as rp
 from fcop_ros.tools import replay_offline
-from fcop_ros.tools.bagio import not_a_bag_of
+from fcop_ros.tools.bagio import BagSource, not_a_bag_of
 from fcop_ros.tools.bagio import BagWriter
 from msg_adapters import depth_to_image, header_from_ns
 
 START = 1_700_000_000_000_000_000
+INPUT_KEYS = ("depth", "nocs", "mask")
+
+
+def _topics() -> list[str]:
+    return [arg for k in INPUT_KEYS for arg in (f"--{k}-topic", mb.TOPICS[k])]
 
 
 @pytest.fixture(scope="module")
@@ -409,6 +414,48 @@ def test_an_empty_topic_is_refused_alike_offline_and_in_play(tmp_path, capsys, m
     assert code == 2
     assert "mask topic '/m' has no messages" in one_line(capsys.readouterr().err)
     assert not (tmp_path / "o").exists()
+
+
+def test_a_truth_topic_without_messages_is_refused(tmp_path, capsys):
+    """A hostile user's trial: a --truth-topic declared in the bag but empty gave exit 0, empty
+    truth columns and no word, where the README refuses any topic without messages."""
+    bag = tmp_path / "t"
+    mb.make_bag(bag, SequenceSpec(3, 160, 120, 150.0, None, None, "mild", 2), seed=3)
+    empty = tmp_path / "t_empty"
+    source = BagSource(bag)
+    with BagWriter(empty, "mcap") as w:
+        for topic, log_ns, raw in source.messages([mb.TOPICS[k] for k in INPUT_KEYS]):
+            w.write_raw(topic, source.topics[topic], raw, log_ns)
+        w._writer.add_connection(mb.TOPICS["truth"], "sensor_msgs/msg/CameraInfo",
+                                 typestore=w._ts)
+    source.close()
+    code = rp.main([str(empty), *_topics(), "--truth-topic", mb.TOPICS["truth"],
+                    "--out", str(tmp_path / "o")])
+    assert code == 2
+    assert f"truth topic '{mb.TOPICS['truth']}' has no messages" in one_line(
+        capsys.readouterr().err)
+    assert not (tmp_path / "o").exists()
+
+
+def test_an_offline_replay_advises_queue_size_from_the_bags_timing(tmp_path, capfd):
+    """A hostile user's trial: NOCS and mask logged 250 ms after their 30 Hz depth. The offline
+    replay feeds one message at a time, and its node timed their arrivals on the wall clock:
+    the advice read 5.8, 7.1 or 8.6 from run to run ('nocs comes 21 ms after the depth ... at
+    356 Hz'). Timed on the bag's log times it reads the bag: 250 ms at 30 Hz, above 7.5."""
+    bag = tmp_path / "b"
+    mb.make_bag(bag, SequenceSpec(12, 160, 120, 150.0, None, None, "mild", 2), seed=3)
+    late = tmp_path / "late"
+    source = BagSource(bag)
+    items = sorted((log_ns + (250_000_000 if topic != mb.TOPICS["depth"] else 0), topic, raw)
+                   for topic, log_ns, raw in source.messages([mb.TOPICS[k] for k in INPUT_KEYS]))
+    with BagWriter(late, "mcap") as w:
+        for log_ns, topic, raw in items:
+            w.write_raw(topic, source.topics[topic], raw, log_ns)
+    source.close()
+    replay_offline.replay(late, *(mb.TOPICS[k] for k in INPUT_KEYS), tmp_path / "o")
+    err = capfd.readouterr().err
+    assert "nocs comes 250 ms after the depth of its stamp, at 30 Hz: queue_size must be above " \
+        "7.5" in err, err[-2000:]
 
 
 @pytest.mark.parametrize("option", ["--clock-hz", "--rate", "--wait-subscribers"])

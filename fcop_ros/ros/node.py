@@ -16,6 +16,7 @@ import threading
 import time
 import traceback
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -93,9 +94,15 @@ class NodeCounts:
 
 
 class FcopNode(Node):
-    """The fcop_node ROS 2 node (see the package README for topics, parameters and the rules)."""
+    """The fcop_node ROS 2 node (see the package README for topics, parameters and the rules).
 
-    def __init__(self, node_name: str = "fcop_node", **kwargs):
+    ``arrival_clock``: seconds, the clock on which the inputs' arrivals are timed (their rates,
+    ages and delays, queue_size advice among them) and the estimator's busy time: monotonic
+    time, or in an offline replay the bag's log time of the message being fed, so that the
+    advice describes the bag rather than how fast the replay ran."""
+
+    def __init__(self, node_name: str = "fcop_node", *,
+                 arrival_clock: Callable[[], float] = time.monotonic, **kwargs):
         self.worker = None  # destroy_node works even when the parameters are refused
         super().__init__(node_name, **kwargs)
         try:
@@ -107,7 +114,7 @@ class FcopNode(Node):
             self.add_pre_set_parameters_callback(self._before_set)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
-        self._now = time.monotonic  # the clock of rates and ages; replaceable in tests
+        self._now = arrival_clock  # the clock of rates and ages; replaceable in tests
         self.ledger = NodeLedger()  # counters and reasons, under self._lock
         self.last_estimate = None  # the FocalEstimate of the newest processed frame
         # Frame and estimator rates over 5 s, for diagnostics (the first reading: since start).

@@ -69,6 +69,19 @@ def _check_encodings(source: BagSource, inputs: dict, decode) -> None:
             close()
 
 
+def _first_log_time(source: BagSource, topics) -> float:
+    """Seconds: the log time of the first message on ``topics`` (0 for none, or damage there:
+    the replay then meets it)."""
+    it = source.messages(list(topics))
+    try:
+        return next(it)[1] * 1e-9
+    except Exception as exc:
+        raise_ctrl_c(exc)
+        return 0.0
+    finally:
+        it.close()
+
+
 def _node_args(inputs: dict) -> list[str]:
     args = ["--ros-args", "-r", f"__ns:={NODE_NAMESPACE}"]
     for role, topic in inputs.items():
@@ -177,7 +190,7 @@ def replay(
         wanted["truth"] = (truth_topic, INFO_TYPE)
     try:
         check_topics(source, wanted)
-        check_not_empty(source, inputs)
+        check_not_empty(source, inputs | ({"truth": truth_topic} if truth_topic else {}))
         total = source.counts[depth_topic]
         _check_encodings(source, inputs, lambda raw: deserialize_message(raw, Image))
         _not_the_input(bag, out_dir)
@@ -208,6 +221,9 @@ def replay(
         "said_warming": False,
     }
 
+    # The node times its inputs' arrivals on the bag's log time (queue_size advice, ages): fed
+    # one message at a time, how fast they come says nothing of the bag.
+    bag_time = [_first_log_time(source, inputs.values())]
     ctx = Context()
     with isolated() as domain:  # an offline replay keeps off the shell's ROS graph
         rclpy.init(context=ctx, args=[], domain_id=domain)
@@ -221,6 +237,7 @@ def replay(
             node = state["node"] = FcopNode(
                 context=ctx,
                 cli_args=_node_args(inputs),
+                arrival_clock=lambda: bag_time[0],
                 parameter_overrides=[Parameter(k, value=v) for k, v in params.items()],
             )
         except Exception as exc:  # checked above already; the node's own refusal, as one line
@@ -321,9 +338,10 @@ def replay(
                 got[key].clear()
 
         try:
-            for topic, _, raw in source.messages(
+            for topic, log_ns, raw in source.messages(
                 list(inputs.values()) + [truth_topic] * bool(truth_topic)
             ):
+                bag_time[0] = log_ns * 1e-9
                 if topic == truth_topic:
                     info = deserialize_message(raw, CameraInfo)
                     table.truth(stamp_ns(info), float(info.k[0]))
