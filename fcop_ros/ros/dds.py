@@ -66,7 +66,6 @@ def keep_on_this_machine(env=None, domain_id: int | None = None) -> dict:
     return env
 
 
-
 @contextmanager
 def isolated(env=None):
     """While it lasts, ``env`` (default os.environ) has a run whose publishers and subscribers

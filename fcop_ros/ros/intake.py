@@ -64,8 +64,7 @@ class Intake:
         # delay), and how late each input's newest came after the first of its stamp (s; None
         # until known).
         self._when: list = [{} for _ in self.inputs]
-        self._lag: list = [None] * len(self.inputs)
-        self._after: list = list(range(len(self.inputs)))  # the input each one's lag is after
+        self._lag: list = [None] * len(self.inputs)  # (delay s, the input it is after)
         self._first: float | None = None  # clock time of the first message of any input
 
     def _note_arrival(self, index: int, stamp: int, now: float) -> None:
@@ -87,8 +86,7 @@ class Intake:
                           if abs(s - stamp) <= slop]
         # First of its stamp: on time now, whatever it was before.
         t, j = min(first) if first else (now, index)
-        self._lag[index] = now - t
-        self._after[index] = j
+        self._lag[index] = (now - t, j)
 
     def reset(self) -> None:
         """A fresh start of the synchroniser (its clocks too): no frame has matched since. The
@@ -125,18 +123,18 @@ class Intake:
         """What queue_size the inputs' delays need, when the latest input comes later than the
         queue covers (e.g. 'nocs comes 250 ms after the depth of its stamp, at 30 Hz:
         queue_size must be above 7.5'), else ''."""
-        late = [(lag, i) for i, lag in enumerate(self._lag) if lag is not None and lag > 0]
+        late = [(lag[0], i, lag[1]) for i, lag in enumerate(self._lag)
+                if lag is not None and lag[0] > 0]
         if not late:
             return ""
-        lag, i = max(late, key=lambda item: (round(item[0], 3), -item[1]))
+        lag, i, after = max(late, key=lambda item: (round(item[0], 3), -item[1]))
         # The others queue that long at their fastest rate.
         rate = max(self._rate(j) for j in range(len(self.inputs)) if j != i)
         need = lag * rate
         if need < self.sync.queue_size:
             return ""
-        return (f"{self.inputs[i]} comes {lag * 1000:.0f} ms after the "
-                f"{self.inputs[self._after[i]]} of its stamp, at {rate:.0f} Hz: queue_size must "
-                f"be above {need:.1f}")
+        return (f"{self.inputs[i]} comes {lag * 1000:.0f} ms after the {self.inputs[after]} of "
+                f"its stamp, at {rate:.0f} Hz: queue_size must be above {need:.1f}")
 
     def _waiting_hint(self, waiting, now: float) -> str:
         """Why the queued messages find nothing to match: inputs that never sent or stopped

@@ -240,8 +240,9 @@ def _nothing_published(summary: ReplaySummary) -> str:
         hint = "-p focal_min:=... / -p focal_max:=... if the camera's focal lies outside"
     elif std:
         # Just above the last estimate's std_rel, in two significant digits (the default 0.05).
-        above = float(f"{float(std.group(1)) * 1.2:.1g}") if float(std.group(1)) > 0 else 0.05
-        while above <= float(std.group(1)):
+        held = float(std.group(1))
+        above = float(f"{held * 1.2:.1g}") if held > 0 else 0.05
+        while above <= held:
             above *= 1.5
         hint = (f"-p max_uncertainty:={float(f'{above:.2g}'):g} (or higher) to publish "
                 "estimates that uncertain")

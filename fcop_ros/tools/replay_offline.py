@@ -41,25 +41,28 @@ def _check_encoding(role: str, topic: str, msg) -> None:
         )
 
 
-def _check_encodings(source: BagSource, inputs: dict, decode) -> None:
+def _check_encodings(source: BagSource, inputs: dict, decode) -> float:
     """ReplayError when the first message of an input topic has an encoding the node cannot
     read: checked before --out is touched. ``decode(raw)`` gives the Image. The bag is read
     only until each topic with messages has shown one; damage ends the check (the replay then
-    meets it and keeps what came before)."""
+    meets it and keeps what came before). Returns the first input message's log time (s; 0
+    when none could be read)."""
     role_of = {topic: role for role, topic in inputs.items()}
     left = {t for t in role_of if source.counts.get(t, 0)}
     it = source.messages(sorted(left))
+    first = None
     try:
         while left:
             try:
-                topic, _, raw = next(it)
+                topic, log_ns, raw = next(it)
             except StopIteration:
-                return
+                break
             except (ReplayError, BagError):
                 raise
             except Exception as exc:  # damage: the replay reports it
                 raise_ctrl_c(exc)
-                return
+                break
+            first = log_ns * 1e-9 if first is None else first
             if topic in left:
                 left.discard(topic)
                 _check_encoding(role_of[topic], topic, decode(raw))
@@ -67,19 +70,7 @@ def _check_encodings(source: BagSource, inputs: dict, decode) -> None:
         close = getattr(it, "close", None)
         if close is not None:
             close()
-
-
-def _first_log_time(source: BagSource, topics) -> float:
-    """Seconds: the log time of the first message on ``topics`` (0 for none, or damage there:
-    the replay then meets it)."""
-    it = source.messages(list(topics))
-    try:
-        return next(it)[1] * 1e-9
-    except Exception as exc:
-        raise_ctrl_c(exc)
-        return 0.0
-    finally:
-        it.close()
+    return first or 0.0
 
 
 def _node_args(inputs: dict) -> list[str]:
@@ -192,7 +183,8 @@ def replay(
         check_topics(source, wanted)
         check_not_empty(source, inputs | ({"truth": truth_topic} if truth_topic else {}))
         total = source.counts[depth_topic]
-        _check_encodings(source, inputs, lambda raw: deserialize_message(raw, Image))
+        first_log_time = _check_encodings(source, inputs,
+                                          lambda raw: deserialize_message(raw, Image))
         _not_the_input(bag, out_dir)
         # Only now is --out touched: the CSV first, so an unwritable one keeps the previous
         # output bag.
@@ -223,7 +215,7 @@ def replay(
 
     # The node times its inputs' arrivals on the bag's log time (queue_size advice, ages): fed
     # one message at a time, how fast they come says nothing of the bag.
-    bag_time = [_first_log_time(source, inputs.values())]
+    bag_time = [first_log_time]
     ctx = Context()
     with isolated() as domain:  # an offline replay keeps off the shell's ROS graph
         rclpy.init(context=ctx, args=[], domain_id=domain)
