@@ -164,6 +164,21 @@ the mask width, only where its outline meets the background at its own depth (wi
 base on the table), not at its occluding contours. Every mechanism is zero-mean as the families
 are (the field's and the shift's signs, the contact width's) except the 28x28 grid, a
 resolution of the pipeline (its error is symmetric within each block).
+A fourteenth (``variant="heldout13"``, fixed on 25 Nov 2026 before any evaluation on it, at an
+estimator and window the round had not changed) errs as a stereo sensor, an affine-invariant
+depth network and a category prior do in ways the others leave out, with the tuning model's
+camera, depth fields and masks: the per-pixel depth noise grows with the square of the depth,
+not with the depth (relative noise times the true depth over 1 m, as a stereo pair's
+disparity error); the additive depth offset is drawn anew in every frame from the sequence's
+strength (a network whose depth is known up to a shift, fitted frame by frame); with per-pixel
+depth noise, each object is see-through with a probability of 0.15, kept for the sequence: over
+an ellipse of about a share in 0.2..0.5 of its pixels (kept), at a place drawn anew in every
+frame, the depth reads the table behind it (glass or a specular surface that a sensor or
+network sees through; not zero-mean: it only ever moves depth back); and, in place of the
+tuning model's NOCS field, each object's NOCS are moved by a smooth warp of NOCS space kept for
+the sequence, four Gaussian bumps of random centre, width and direction scaled to the NOCS
+field's strength per axis over the unit cube (the category's typical shape in place of the
+instance's, a deformation that turns with the object, not one fixed in the image).
 """
 from __future__ import annotations
 
@@ -383,7 +398,8 @@ def _lens_row_field(rng, h, w, cells):
 
 
 VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5", "heldout6",
-            "heldout7", "heldout8", "heldout9", "heldout10", "heldout11", "heldout12")
+            "heldout7", "heldout8", "heldout9", "heldout10", "heldout11", "heldout12",
+            "heldout13")
 # heldout7's image fields are the tuning grid's, drawn per segment (ErrorState._segments);
 # heldout8's finer ones are the tuning grid's, grown with depth (ErrorState._grown);
 # heldout9 has no image field: its depth fields are sinusoids fixed in the scene
@@ -391,12 +407,13 @@ VARIANTS = ("tuning", "heldout", "heldout2", "heldout3", "heldout4", "heldout5",
 # heldout10's depth fields are the tuning grid's, its NOCS distortion a bend (_bend);
 # heldout12 has no image field: its depth field follows the grazing angle
 # (ErrorState._grazing_field), its NOCS distortion a misregistration of each object's
-# NOCS map (_roi_shift).
+# NOCS map (_roi_shift); heldout13's depth fields are the tuning grid's, its NOCS distortion a
+# warp of NOCS space (_shape_warp).
 _FIELDS = {"tuning": _grid_field, "heldout": _sine_field, "heldout2": _bump_field,
            "heldout3": _poly_field, "heldout4": _ring_field, "heldout5": _tile_field,
            "heldout6": _lens_row_field, "heldout7": _grid_field, "heldout8": _grid_field,
            "heldout9": _grid_field, "heldout10": _grid_field, "heldout11": _grid_field,
-           "heldout12": _grid_field}
+           "heldout12": _grid_field, "heldout13": _grid_field}
 # heldout8's familiar-size cue: the typical size (bounding-box diagonal, m; the geometric mean
 # of SceneSpec's range) and the spread of log sizes that one unit of the field stands for.
 _TYPICAL_SIZE = 0.17
@@ -633,7 +650,7 @@ class ErrorState:
 def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> Frame:
     """The frame as the predictors would see it under ``state`` (which this call advances)."""
     e = state.err
-    if "offset" in state.renew and e.offset > 0:
+    if ("offset" in state.renew or state.variant == "heldout13") and e.offset > 0:
         state.offset = float(rng.normal(0, e.offset))
     depth, nocs, mask = frame.depth.copy(), frame.nocs.copy(), frame.mask.copy()
     h, w = depth.shape
@@ -657,6 +674,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             nocs[m] = 0.5 + (nocs[m] - 0.5) * ob["shape"]
     if state.variant == "heldout10" and e.relief > 0:
         depth = _sharpened(depth, frame.mask, state, rng, e.relief)
+    if state.variant == "heldout13" and e.depth_pixel > 0:
+        depth = _see_through(depth, frame, state, rng)
     if e.edge_px > 0:
         far = np.nanmax(depth) if finite.any() else 1.0
         filled = np.where(finite, depth, far).astype(np.float32)
@@ -732,7 +751,9 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             total = sum(state._field(("depth", c), rng, h, w, c) for c in e.field_cells)
         depth *= 1.0 + e.field * total / np.sqrt(len(e.field_cells))
     if e.depth_pixel > 0:
-        depth *= 1.0 + e.depth_pixel * rng.normal(size=(h, w))
+        # heldout13's stereo noise: relative noise times the true depth over 1 m.
+        grows = (np.nan_to_num(frame.depth, nan=1.0) if state.variant == "heldout13" else 1.0)
+        depth *= 1.0 + e.depth_pixel * grows * rng.normal(size=(h, w))
     if e.nocs_field > 0:
         if state.variant == "heldout2":
             nocs = _twist(nocs, mask, state, rng, e.nocs_field)
@@ -754,6 +775,8 @@ def apply_errors(frame: Frame, state: ErrorState, rng: np.random.Generator) -> F
             nocs = _bend(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout12":
             nocs = _roi_shift(nocs, mask, state, rng, e.nocs_field)
+        elif state.variant == "heldout13":
+            nocs = _shape_warp(nocs, mask, state, rng, e.nocs_field)
         elif state.variant == "heldout":
             # Scaled to ``nocs_field`` rms on the objects, as the other variants' distortions:
             # unscaled, q^T W q with |q| < 0.5 moved the NOCS 8x less than the tuning field.
@@ -1138,6 +1161,67 @@ def _holes(depth, truth, rng):
     return out
 
 
+def _see_through(depth, frame, state, rng):
+    """``depth`` where the see-through objects (each with a probability of 0.15, kept for the
+    sequence) read the table behind them, over an ellipse of about a share in 0.2..0.5 of their
+    pixels (kept) centred at one of their pixels drawn anew in every frame: glass or a specular
+    surface that a sensor or network sees through. The table is the plane through the truth's
+    background; only pixels whose ray meets it behind the object change."""
+    h, w = depth.shape
+    bg = (frame.mask == 0) & np.isfinite(frame.depth)
+    if bg.sum() < 3:
+        return depth
+    cx, cy = frame.principal_point
+    vv, uu = np.mgrid[0:h, 0:w]
+    rays = np.stack([(uu - cx) / frame.focal, (vv - cy) / frame.focal, np.ones((h, w))], -1)
+    pts = rays[bg] * frame.depth[bg][:, None]
+    centre = pts.mean(0)
+    normal = np.linalg.svd(pts - centre, full_matrices=False)[2][-1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        behind = (centre @ normal) / (rays @ normal)
+    out = depth.copy()
+    for iid in np.unique(frame.mask[frame.mask > 0]):
+        if not state._kept(("see_through", int(iid)), lambda: bool(rng.random() < 0.15)):
+            continue
+        share = state._kept(("see_share", int(iid)), lambda: float(rng.uniform(0.2, 0.5)))
+        m = frame.mask == iid
+        ys, xs = np.nonzero(m)
+        k, aspect, angle = rng.integers(len(ys)), rng.uniform(0.5, 2.0), rng.uniform(0, 180)
+        r = np.sqrt(share * len(ys) / np.pi)
+        axes = (max(1, int(round(r * np.sqrt(aspect)))), max(1, int(round(r / np.sqrt(aspect)))))
+        ellipse = np.zeros(m.shape, np.uint8)
+        cv2.ellipse(ellipse, (int(xs[k]), int(ys[k])), axes, float(angle), 0, 360, 1, -1)
+        through = (ellipse > 0) & m & np.isfinite(behind) & (behind > frame.depth)
+        out[through] = behind[through]
+    return out
+
+
+def _shape_warp(nocs, mask, state, rng, rms):
+    """Each object's NOCS moved by a smooth warp of NOCS space kept for the sequence: four
+    Gaussian bumps of random centre in the unit cube, width in 0.25..0.5 and direction, scaled
+    to ``rms`` per axis over the cube. The category's typical shape in place of the instance's:
+    a deformation that turns with the object, not one fixed in the image."""
+    def draw():
+        centres, widths = rng.random((4, 3)), rng.uniform(0.25, 0.5, 4)
+        grid = np.stack(np.meshgrid(*[np.linspace(0, 1, 9)] * 3), -1).reshape(-1, 3)
+        amp = rng.normal(size=(4, 3))
+        amp /= max(float(np.sqrt(np.mean(_bumps(grid, centres, widths, amp) ** 2))), 1e-9)
+        return centres, widths, amp
+
+    out = nocs.copy()
+    for iid in np.unique(mask[mask > 0]):
+        m = mask == iid
+        out[m] = nocs[m] + rms * _bumps(nocs[m], *state._kept(("warp", int(iid)), draw))
+    return out
+
+
+def _bumps(p, centres, widths, amp):
+    """(n, 3): the displacement at NOCS points ``p`` of Gaussian bumps at ``centres`` of
+    ``widths`` and vector amplitudes ``amp``."""
+    d2 = ((p[:, None, :] - centres[None]) ** 2).sum(-1)
+    return np.exp(-d2 / (2 * widths ** 2)) @ amp
+
+
 def _bend(nocs, mask, state, rng, rms):
     """Each object's NOCS bent along its up axis (x += b (y - 0.5)^2) and tapered (x and z
     about 0.5 times 1 + c (y - 0.5)), b in +-12 ``rms`` and c in +-6 ``rms`` (uniform, per
@@ -1436,7 +1520,7 @@ def _mask_errors(mask, nocs, px, rng, variant, state=None):
     polygon with holes; ``heldout5``: fill to the convex hull; ``heldout6``: through a 28x28
     mask head; ``heldout7``: by a width kept for the sequence in ``state``, then bleed into
     touching instances; ``heldout8``: grow and cut by a detection box; ``heldout9`` and
-    ``heldout10`` and ``heldout11``: as the tuning variant; ``heldout12`` has
+    ``heldout10``, ``heldout11`` and ``heldout13``: as the tuning variant; ``heldout12`` has
     :func:`_contact_errors` instead) each instance by up to ``px`` pixels; grown pixels keep
     the background depth and take the nearest object's NOCS, as a segmentation network's
     would."""
@@ -1516,7 +1600,7 @@ def world_frames(preset: str | ErrorFamilies, seed: int, n_frames: int = 1,
     objs, f, (centre, up), (w, h) = world_scene(rng, spec, focal, size, objects)
     errors = fam.draw(rng)
     state = ErrorState.start(errors, rng, variant, renew)
-    camera = variant in ("tuning", "heldout11", "heldout12")  # the others' are their own
+    camera = variant in ("tuning", "heldout11", "heldout12", "heldout13")  # others: their own
     pp = _principal_point(errors.principal_point if camera else 0.0, seed, w, h)
     undistort = _lens(errors.lens if camera else 0.0, seed, variant)
     out = []
