@@ -107,6 +107,32 @@ def test_every_encoding(tmp_path, depth_encoding, nocs_encoding, mask_encoding):
     assert s.frames_estimated == 3 and max(s.errors_pct) < 6.0 and not s.dropped
 
 
+def test_the_truth_of_a_camera_with_two_focal_lengths_is_their_mean(tmp_path):
+    """fcop_ros estimates one focal length, fx = fy; a truth CameraInfo with fy 4% above fx is
+    judged as fcop_eval_nocs judges REAL275's intrinsics, by (fx + fy) / 2 (the replay took fx
+    alone: 150.0 here)."""
+    from rclpy.serialization import serialize_message
+
+    src_path = tiny_bag(tmp_path / "in", frames=3)
+    src = BagSource(src_path)
+    topics = [mb.TOPICS[k] for k in ("depth", "nocs", "mask", "truth")]
+    types = {t: src.topics[t] for t in topics}
+    with BagWriter(tmp_path / "anamorphic", "mcap") as w:
+        for topic, log_ns, raw in src.messages(topics):
+            if topic == mb.TOPICS["truth"]:
+                info = deserialize_message(raw, CameraInfo)
+                k = list(info.k)
+                k[4] = 1.04 * k[0]
+                info.k = k
+                raw = serialize_message(info)
+            w.write_raw(topic, types[topic], bytes(raw), log_ns)
+    src.close()
+    run(tmp_path / "anamorphic", tmp_path / "out")
+    rows = read_csv(tmp_path / "out" / "estimates.csv")
+    assert len(rows) == 3
+    assert [float(r["focal_true"]) for r in rows] == [pytest.approx(1.02 * F)] * 3
+
+
 def test_zoom_reconverges_in_the_csv(tmp_path):
     bag = tiny_bag(tmp_path / "in", frames=24, zoom=(12, 190.0))
     run(bag, tmp_path / "out")

@@ -157,6 +157,7 @@ def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None,
     (rows, per-scene medians) and write the per-frame CSV. ``progress(done, total)`` is called
     once the CSV is open (done 0) and after every frame's row."""
     from ..core import estimate_focal
+    from ..core.camera import true_focal
 
     root = Path(root)
     if not root.is_dir():
@@ -165,7 +166,7 @@ def evaluate(root, intrinsics, depth_dir=None, nocs_dir=None, out_csv=None,
     if not frames:
         raise FileNotFoundError(f"no frame (*_mask.png with *_coord.png) under {root}")
     fx, fy, cx, cy = intrinsics
-    f_true = 0.5 * (fx + fy)
+    f_true = true_focal(fx, fy)
     rows = []
     # Opened first and written row by row: a --csv that cannot be written fails before hours of
     # estimation, and an interrupted run keeps the frames before.

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..core.camera import true_focal
 from ..ros.dds import isolated, use_large_image_profile
 from ..ros.spin import shut_down, spin_until as spin
 from .bagio import BagError, BagSource, BagWriter, error_text, not_a_bag_of, remove_bag
@@ -336,7 +337,7 @@ def replay(
                 bag_time[0] = log_ns * 1e-9
                 if topic == truth_topic:
                     info = deserialize_message(raw, CameraInfo)
-                    table.truth(stamp_ns(info), float(info.k[0]))
+                    table.truth(stamp_ns(info), true_focal(info.k[0], info.k[4]))
                     continue
                 role = role_of[topic]
                 pubs[topic].publish(raw)
