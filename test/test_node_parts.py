@@ -507,6 +507,16 @@ def test_diagnostics_ok_reports_the_estimate_and_timing():
     assert values["processing_ms_max"] == "30.00" and values["dropped_no_evidence"] == "2"
 
 
+def test_diagnostics_leave_the_timing_blank_before_any_frame():
+    """No frame estimated yet: the processing times are blank, as the focal length and the age
+    are, not 0.00 ms (a time nothing measured)."""
+    idle = _reading(window_estimate=WindowEstimate(None, reason="no frames"), publishable=False,
+                    processed=0, matched=0, camera_info_published=0, processing_ms=())
+    _, _, values = status_fields(idle, Rates(span=5.0, matched=0, processed=0, skipped=0))
+    assert values["processing_ms_median"] == values["processing_ms_max"] == ""
+    assert values["focal_px"] == values["std_rel"] == ""
+
+
 @pytest.mark.parametrize(
     "reading, rates, level, words",
     [

@@ -204,7 +204,6 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         )
     else:
         level, message = OK, f"focal {win.focal:.1f} px"
-    times = np.array(d.processing_ms) if d.processing_ms else np.zeros(1)
     values = {
         "focal_px": "" if win.focal is None else f"{win.focal:.3f}",
         "std_rel": "" if std is None else f"{std:.5f}",
@@ -220,8 +219,9 @@ def status_fields(d: DiagnosticsInput, rates: Rates) -> tuple[bytes, str, dict]:
         "camera_info_published": str(d.camera_info_published),
         "sync_matched": str(d.matched),
         "sync_dropped": str(d.sync_dropped),
-        "processing_ms_median": f"{np.median(times):.2f}",
-        "processing_ms_max": f"{np.max(times):.2f}",
+        # Blank before the first frame, as the other values nothing has measured yet.
+        "processing_ms_median": f"{np.median(d.processing_ms):.2f}" if d.processing_ms else "",
+        "processing_ms_max": f"{np.max(d.processing_ms):.2f}" if d.processing_ms else "",
         "estimator_kernels": d.kernels,
     }
     values.update({f"{name}_age_s": "" if age is None else f"{age:.2f}"
