@@ -493,6 +493,32 @@ def test_one_object_with_a_lost_channel_is_named_as_several_are():
 
 
 
+def test_a_thin_object_erosion_removed_and_a_small_piece_are_named_as_such():
+    """A new user's trials. A strip one pixel high (44 valid pixels) that the mask's erosion
+    empties was refused as having too few valid pixels; the reason now names the erosion. A
+    10x10 piece of one object (its NOCS span 0.012, every channel nearly constant) was refused
+    as "a lost channel?"; it is a piece too small to tell, and the reason says that alone."""
+    fr = clean_frame(2)
+    ys, xs = np.nonzero(fr.mask == 1)
+    y, x = ys[len(ys) // 2], xs[len(ys) // 2]
+    strip = np.zeros_like(fr.mask)
+    strip[y, x - 30:x + 30] = 1
+    strip[fr.mask != 1] = 0
+    n = int(strip.sum())
+    est = estimate_focal(fr.depth, fr.nocs, strip, options=EstimatorOptions(min_object_pixels=3),
+                         seed=0, poses=False)
+    assert est.focal is None and est.reason == (
+        f"no instance with >= 3 valid pixels after eroding each mask by erode_px=1 (the largest "
+        f"had {n} before: a small or thin object; lower erode_px)"), est.reason
+    piece = np.zeros_like(fr.mask)
+    yc, xc = int(np.median(ys)), int(np.median(xs))
+    piece[yc - 5:yc + 5, xc - 5:xc + 5] = 1
+    piece[fr.mask != 1] = 0
+    est = estimate_focal(fr.depth, fr.nocs, piece, seed=1, poses=False)
+    assert est.focal is None and "lost channel" not in est.reason, est.reason
+    assert "too small a piece of the category's shape" in est.reason, est.reason
+
+
 def test_a_principal_point_of_bools_is_refused():
     """(True, False) was taken as (1.0, 0.0) and ("320", "240") as numbers: neither is a pair of
     coordinates; numpy's numbers are."""

@@ -616,6 +616,23 @@ def test_stamps_must_be_finite_numbers_that_do_not_go_back():
     assert w.add(estimate(600.0), 0.0).frames == 1
 
 
+def test_what_is_no_estimate_is_refused_by_name():
+    """A new user's trial: add(None, t) failed with "'NoneType' object has no attribute
+    'image_size'", a focal of "600" with numpy's "ufunc 'isfinite' not supported", and a
+    negative std_rel was taken as its size. Each now names what is wrong."""
+    w = FocalWindow()
+    with pytest.raises(TypeError, match="must be a FocalEstimate"):
+        w.add(None, 0.0)
+    with pytest.raises(TypeError, match="focal must be a number or None, got '600'"):
+        w.add(replace(estimate(600.0), focal="600"), 0.0)
+    with pytest.raises(TypeError, match="std_rel must be a number or None"):
+        w.add(replace(estimate(600.0), std_rel="0.01"), 0.0)
+    with pytest.raises(ValueError, match="std_rel must be >= 0 or None, got -0.01"):
+        w.add(replace(estimate(600.0), std_rel=-0.01), 0.0)
+    assert len(w) == 0
+    assert w.add(estimate(600.0), 0.0).frames == 1
+
+
 def test_max_frames_max_age_and_reset():
     w = FocalWindow(WindowOptions(max_frames=5, max_age=0.25))
     for k in range(10):

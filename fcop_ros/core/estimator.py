@@ -192,6 +192,11 @@ def _no_instance_reason(depth, nocs, mask, opt: EstimatorOptions) -> str:
     if not predicted.any():
         return "the NOCS are zero or not finite (no prediction) on every object pixel"
     reason = f"no instance with >= {opt.min_object_pixels} valid pixels"
+    valid = mask[on][depth_ok & predicted]
+    most = int(np.unique(valid, return_counts=True)[1].max()) if valid.size else 0
+    if opt.erode_px > 0 and most >= opt.min_object_pixels:
+        reason += (f" after eroding each mask by erode_px={opt.erode_px} (the largest had {most}"
+                   " before: a small or thin object; lower erode_px)")
     if opt.min_object_pixels > opt.max_pixels:
         reason += (f" (min_object_pixels={opt.min_object_pixels} is above max_pixels="
                    f"{opt.max_pixels}, about what a large object keeps: lower min_object_pixels)")
@@ -461,12 +466,14 @@ def _moments_kernel(x, d, p, step, focal, out):
 
 def _constant_channel(instances, tolerance: float = 0.01, points: int = 200):
     """(channel, value) of a NOCS channel whose standard deviation over every object's pixels
-    (every step-th, at most ``points`` per object) is below ``tolerance`` (a lost channel: an
-    object's own NOCS span 0.1 or more), or None."""
+    (every step-th, at most ``points`` per object) is below ``tolerance`` while another's is 3
+    times that or more (a lost channel: an object's own NOCS span 0.1 or more), or None."""
     p = np.concatenate([inst.p[::max(1, -(-len(inst.p) // points))] for inst in instances])
     std = p.std(0)
     c = int(np.argmin(std))
-    return (c, float(np.median(p[:, c]))) if std[c] < tolerance else None
+    # All three channels nearly constant is a piece too small to tell, not a channel lost.
+    lost = std[c] < tolerance and np.max(std) >= 3 * tolerance
+    return (c, float(np.median(p[:, c]))) if lost else None
 
 
 def _lost_text(lost) -> str:

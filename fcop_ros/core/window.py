@@ -98,6 +98,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .camera import is_number
 from .estimator import FocalEstimate
 from .options import WindowOptions
 from .offsets import IntrinsicsEvidence, pooled_offset
@@ -190,6 +191,16 @@ class FocalWindow:
                 f"stamp {stamp} is before the newest frame's ({self._frames[-1].stamp}); "
                 "call reset() after a jump back in time"
             )
+        if not isinstance(estimate, FocalEstimate):
+            raise TypeError(f"estimate must be a FocalEstimate (estimate_focal's result, with "
+                            f"focal None when it gave none), got {estimate!r}")
+        for name in ("focal", "std_rel"):
+            value = getattr(estimate, name)
+            if value is not None and not is_number(value):
+                raise TypeError(f"the estimate's {name} must be a number or None, got {value!r}")
+        if estimate.std_rel is not None and estimate.std_rel < 0:
+            raise ValueError(f"the estimate's std_rel must be >= 0 or None, got "
+                             f"{estimate.std_rel!r}")
         size = tuple(estimate.image_size) if estimate.image_size else None
         new_size = (
             bool(self._frames) and size is not None and self._frames[-1].size not in (None, size)
