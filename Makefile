@@ -36,7 +36,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_node.py --frames 300 --closed-loop-frames 30 --slow-ms 100
 	$(PY) bench/world_calibration.py --frames 300 --presets sensor --gains 1.0
 	$(PY) bench/world_calibration.py --frames 1000 --presets predicted --gains 0.55
-	for set in "" --heldout10 --heldout11 --heldout12; do \
+	for set in "" --heldout10 --heldout11 --heldout12 --heldout13; do \
 	  $(PY) bench/world_accuracy.py --frames 60 --parts single window zoom $$set || exit 1; done
 	$(PY) bench/world_accuracy.py --parts bias preset_bias --bias-frames 1000
 	$(PY) bench/world_accuracy.py --parts preset_bias --bias-frames 1000 --heldout11
