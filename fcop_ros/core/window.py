@@ -198,6 +198,9 @@ class FocalWindow:
             value = getattr(estimate, name)
             if value is not None and not is_number(value):
                 raise TypeError(f"the estimate's {name} must be a number or None, got {value!r}")
+        if estimate.focal is not None and not (np.isfinite(estimate.focal) and estimate.focal > 0):
+            raise ValueError(f"the estimate's focal must be finite and > 0, or None; got "
+                             f"{estimate.focal!r}")
         if estimate.std_rel is not None and estimate.std_rel < 0:
             raise ValueError(f"the estimate's std_rel must be >= 0 or None, got "
                              f"{estimate.std_rel!r}")
@@ -205,9 +208,6 @@ class FocalWindow:
         new_size = (
             bool(self._frames) and size is not None and self._frames[-1].size not in (None, size)
         )
-        if estimate.focal is not None and not (np.isfinite(estimate.focal) and estimate.focal > 0):
-            raise ValueError(f"the estimate's focal must be finite and > 0, or None; got "
-                             f"{estimate.focal!r}")
         if new_size and estimate.focal is None and self.rated:
             return replace(self.current, changed=False)
         if new_size:

@@ -1167,22 +1167,16 @@ def _see_through(depth, frame, state, rng):
     pixels (kept) centred at one of their pixels drawn anew in every frame: glass or a specular
     surface that a sensor or network sees through. The table is the plane through the truth's
     background; only pixels whose ray meets it behind the object change."""
-    h, w = depth.shape
     bg = (frame.mask == 0) & np.isfinite(frame.depth)
     if bg.sum() < 3:
         return depth
-    cx, cy = frame.principal_point
-    vv, uu = np.mgrid[0:h, 0:w]
-    rays = np.stack([(uu - cx) / frame.focal, (vv - cy) / frame.focal, np.ones((h, w))], -1)
-    pts = rays[bg] * frame.depth[bg][:, None]
-    centre = pts.mean(0)
-    normal = np.linalg.svd(pts - centre, full_matrices=False)[2][-1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        behind = (centre @ normal) / (rays @ normal)
+    behind = None  # the table's depth, fitted once a frame has a see-through object
     out = depth.copy()
     for iid in np.unique(frame.mask[frame.mask > 0]):
         if not state._kept(("see_through", int(iid)), lambda: bool(rng.random() < 0.15)):
             continue
+        if behind is None:
+            behind = _table_depth(frame, bg)
         share = state._kept(("see_share", int(iid)), lambda: float(rng.uniform(0.2, 0.5)))
         m = frame.mask == iid
         ys, xs = np.nonzero(m)
@@ -1194,6 +1188,20 @@ def _see_through(depth, frame, state, rng):
         through = (ellipse > 0) & m & np.isfinite(behind) & (behind > frame.depth)
         out[through] = behind[through]
     return out
+
+
+def _table_depth(frame, bg):
+    """(H, W): the depth at which each pixel's ray meets the plane fitted to the truth's
+    background pixels ``bg`` (the table), inf or negative where it does not meet it ahead."""
+    h, w = frame.mask.shape
+    cx, cy = frame.principal_point
+    vv, uu = np.mgrid[0:h, 0:w]
+    rays = np.stack([(uu - cx) / frame.focal, (vv - cy) / frame.focal, np.ones((h, w))], -1)
+    pts = rays[bg] * frame.depth[bg][:, None]
+    centre = pts.mean(0)
+    normal = np.linalg.svd(pts - centre, full_matrices=False)[2][-1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (centre @ normal) / (rays @ normal)
 
 
 def _shape_warp(nocs, mask, state, rng, rms):
