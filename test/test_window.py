@@ -483,15 +483,16 @@ def test_frames_carried_through_a_zoom_weigh_less_by_the_error_of_their_old_view
     """Frames that err by -12% (std_rel 15%) before a 25% zoom and by -1% (4%) after it, whose
     radii measure the zoom: in the 5 of 10 sequences where the focal lengths' step agrees with
     the radii's, the window keeps its older frames, and five frames after the zoom errs by
-    -3.0 to -4.6% (std_rel 6.5%): their budget beyond the newer frames' counts as noise. Taken
-    at full weight, they held it at -9.5 to -9.8% (std_rel 14.9%)."""
+    -3.0 to -4.6% (std_rel 6.4-7.2%, the last widened by its newest frame's disagreement): their
+    budget beyond the newer frames' counts as noise. Taken at full weight, they held it at -9.5
+    to -9.8% (std_rel 14.9%)."""
     carried = []
     for seed in range(10):
         w, rs = _zoom_run(seed, 1.25, 26, (-0.12, 0.15, 0.03, 0.03), (-0.01, 0.04, 0.03, 0.03))
         if len(w) == 26:
             carried.append((np.log(rs[-1].focal / 750.0), rs[-1].std_rel))
     assert len(carried) == 5
-    assert all(-0.05 < e < -0.025 and s < 0.07 for e, s in carried), carried
+    assert all(-0.05 < e < -0.025 and s < 0.075 for e, s in carried), carried
 
 
 def test_one_wild_image_scale_does_not_move_the_split_far():
@@ -768,3 +769,23 @@ def test_an_offset_error_that_repeats_in_every_frame_is_not_averaged_away():
         cover.append(err <= 2 * std), stds.append(std)
     assert np.mean(cover) >= 0.9
     assert np.median(stds) > 2e-3
+
+
+def test_a_newest_frame_the_window_cannot_yet_call_a_zoom_widens_its_std_rel():
+    """A zoom shows first in one frame, too few to tell it from an error: the window's focal
+    is still the old one, and its std_rel says it may be (measured: 0.28% for 20 frames that
+    agree within their 1%, 18.3% once a frame 20% longer follows (0.28% before this term), the
+    log of the step less
+    that frame's own variance; a frame that agrees leaves it at 0.27%)."""
+    rng = np.random.default_rng(3)
+    w = FocalWindow(WindowOptions(max_frames=30))
+    for k, e in enumerate(frames(rng, 20, sigma=0.01)):
+        settled = w.add(e, k / 30)
+    assert settled.std_rel < 0.004
+    zoomed = w.add(estimate(720.0, 0.01, std_rel_noise=0.01), 20 / 30)
+    assert not zoomed.changed and abs(zoomed.focal / 600.0 - 1) < 0.01
+    assert zoomed.std_rel > 0.17  # log(1.2) = 0.182, less the frame's own 1%: 2 std_rel cover
+    agreeing = FocalWindow(WindowOptions(max_frames=30))
+    for k, e in enumerate(frames(np.random.default_rng(3), 20, sigma=0.01)):
+        agreeing.add(e, k / 30)
+    assert agreeing.add(estimate(601.0, 0.01, std_rel_noise=0.01), 20 / 30).std_rel < 0.004
