@@ -4,7 +4,8 @@
         [--heldout | --heldout2 | --heldout3 | --heldout4 | --heldout5 | --heldout6
          | --heldout7 | --heldout8 | --heldout9 | --heldout10 | --heldout11 | --heldout12
          | --heldout13]
-        [--parts single bias window zoom preset_bias pipes weights tau] [--objects N]
+        [--parts single bias window zoom preset_bias pipes weights tau objects gate]
+        [--objects N]
         [--set NAME=VALUE] [--orbit DEG] [--given-principal-point] [--first-sequence SEED]
         [--world NAME=VALUE] [--renew FAMILY]
 
@@ -73,7 +74,8 @@ share, which no weighing of those frames averages away: a floor a window nears, 
 cannot pass); zoom sequences (x1.25 and x0.8 at frame 20 of 40): frames until the window
 stays within 5% of the new focal length, and restarts on static ones. Zoom (``--parts zoom``):
 the same zoom sequences, each one that does not settle within 15 frames told apart by whether
-the window restarted at the zoom and how far the frames after it err themselves. Preset bias
+the window restarted at the zoom and how far the frames after it err themselves, beside the
+window's coverage of 2 std_rel over the 20 updates after each zoom. Preset bias
 (``--parts preset_bias``): fcop_ros's signed median over ``--bias-frames`` frames of each full
 preset, with its standard error. Pipes (``--parts pipes``): the NOCS image through JPEG
 (``nocs_jpeg``, in no preset) alone, and the shift it makes in ``predicted`` frame by frame on
@@ -81,7 +83,10 @@ the same frames; then which part of JPEG does it, on frames with NOCS noise alon
 (``--parts weights``): within a frame, how the
 objects' errors rank with their systematic and their noise variance, and the frame's error
 under either weighting. Tau (``--parts tau``): the between-object spread that frames of two
-or more objects show, the rule ``object_tau`` was set by. ``--objects N`` makes every scene
+or more objects show, the rule ``object_tau`` was set by. Gate (``--parts gate``): on the
+window part's static sequences, the share of window updates whose std_rel a node's
+``max_uncertainty`` of 0.02, 0.05 (its default) or 0.1 lets through, and how far those err.
+``--objects N`` makes every scene
 one of N objects (1: the frames a single object gives, which no disagreement between objects
 can check); ``--set NAME=VALUE`` tries other EstimatorOptions (the docs' figures use the
 defaults).
@@ -537,23 +542,54 @@ def objects(presets, sequences, first_seed, variant):
               f"| {' | '.join(cells)} |", flush=True)
 
 
+#: max_uncertainty values the gate part tries: the node's default (0.05, config/fcop.yaml) and
+#: one tighter and one looser.
+GATES = (0.02, 0.05, 0.1)
+
+
+def gate(presets, sequences, first_seed, variant):
+    """What a node's ``max_uncertainty`` lets through on the window part's static sequences:
+    per value, the share of window updates (from the sixth frame on) whose std_rel is at most
+    it, and the median and p90 |error| of those and the share of them beyond 5%: how often a
+    robot gets CameraInfo, and how good what it gets is."""
+    print("\n| preset | max_uncertainty | published updates | their median / p90 abs error % "
+          "| published beyond 5% |")
+    print("|---|---|---|---|---|")
+    for preset in presets:
+        err, std = [], []
+        for q in range(sequences):
+            for k, (t, _, _, wf, ws, _) in enumerate(run_sequence(preset, first_seed + q, 30,
+                                                                   variant)):
+                if k >= 5 and wf is not None:
+                    err.append(abs(np.log(wf / t)))
+                    std.append(ws)
+        err, std = np.array(err), np.array(std)
+        for g in GATES:
+            out = err[std <= g]
+            cells = (f"{100 * np.median(out):.2f} / {100 * np.percentile(out, 90):.2f} | "
+                     f"{100 * np.mean(out > 0.05):.1f}%" if out.size else "- | -")
+            print(f"| {preset} | {g:g} | {100 * out.size / err.size:.0f}% | {cells} |",
+                  flush=True)
+
+
 def zoom(presets, zoom_sequences, first_seed, variant):
     """What keeps a zoom sequence from being within 5% for good in 15 frames: the window's
     restart (frames from the zoom to the first restart after it) or the sequence's own frames
     (the median |error| of the single frames after the zoom, which no window averages away
     when a static scene repeats the same predictor errors every frame)."""
     print("\n| preset | zoom sequences | within 5% for good in 15 frames | restarted within 3 "
-          "frames | not within 15 frames: restart delay; median abs error % of the frames after "
-          "the zoom, single / window at the end |")
-    print("|---|---|---|---|---|")
+          "frames | window coverage of 2 std_rel after the zoom | not within 15 frames: restart "
+          "delay; median abs error % of the frames after the zoom, single / window at the end |")
+    print("|---|---|---|---|---|---|")
     for preset in presets:
-        within, prompt, misses = 0, 0, []
+        within, prompt, misses, cover = 0, 0, [], []
         for q in range(zoom_sequences):
             for factor in (1.25, 0.8):
                 rows, delay = zoom_sequence(preset, first_seed + 100 + q, variant, factor)
                 restart = next((i for i, r in enumerate(rows) if r[5]), None)
                 within += delay <= 15
                 prompt += restart is not None and restart <= 3
+                cover += [abs(np.log(r[3] / r[0])) <= 2 * r[4] for r in rows if r[3] is not None]
                 if delay > 15:
                     # A sequence whose frames all go unanswered after the zoom (its objects
                     # left the view) has no single-frame error: "no frame", not a NaN and
@@ -566,8 +602,8 @@ def zoom(presets, zoom_sequences, first_seed, variant):
                                   f"{'none' if restart is None else restart}; "
                                   f"{single} / {end}")
         n = 2 * zoom_sequences
-        print(f"| {preset} | {n} | {within} | {prompt} | {', '.join(misses) or '-'} |",
-              flush=True)
+        print(f"| {preset} | {n} | {within} | {prompt} | {100 * np.mean(cover):.0f}% | "
+              f"{', '.join(misses) or '-'} |", flush=True)
 
 
 def main() -> None:
@@ -589,7 +625,7 @@ def main() -> None:
                               "instead")
     ap.add_argument("--parts", nargs="+", default=["single", "bias", "window"],
                     choices=["single", "bias", "window", "zoom", "preset_bias", "pipes",
-                             "weights", "tau", "objects"],
+                             "weights", "tau", "objects", "gate"],
                     help="zoom (not run by default): what keeps each zoom sequence from "
                     "settling, the restart or the frames themselves; preset_bias (not run by "
                     "default): fcop_ros's signed median over --bias-frames frames of each full "
@@ -597,7 +633,9 @@ def main() -> None:
                     "`predicted`, on --frames frames; weights (not run by default): "
                     "what ranks the objects' errors within a frame, over --bias-frames frames; "
                     "objects (not run by default): a window that pools each object over its "
-                    "frames first, on the window part's static sequences (a trial, not kept)")
+                    "frames first, on the window part's static sequences (a trial, not kept); "
+                    "gate (not run by default): the share of window updates each "
+                    "max_uncertainty lets through, and their errors")
     ap.add_argument("--bias-frames", type=int, default=2000,
                     help="frames per preset for preset_bias")
     ap.add_argument("--objects", type=int, default=None,
@@ -673,6 +711,8 @@ def main() -> None:
         weights(presets, args.bias_frames, frame_seed, variant)
     if "tau" in args.parts:
         tau(presets, args.frames, frame_seed, variant)
+    if "gate" in args.parts:
+        gate(presets, args.sequences, seq_seed, variant)
     if "objects" in args.parts:
         objects(presets, args.sequences, seq_seed, variant)
 
