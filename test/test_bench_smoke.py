@@ -69,3 +69,18 @@ def test_world_accuracy_window_trials_run_and_say_their_settings():
     assert "sequences from seed 7000" in out.stdout, out.stdout
     rows = re.findall(r"^\| (sensor|predicted) \| 2 \|", out.stdout, re.M)
     assert rows == ["sensor", "predicted"], out.stdout
+
+
+def test_world_accuracy_gate_part_prints_a_row_per_preset_and_max_uncertainty():
+    """The gate part (docs/BENCHMARKS.md, "What max_uncertainty lets through") on two short
+    sequences: three rows per preset, each with the share of updates it publishes."""
+    out = subprocess.run(
+        [sys.executable, os.path.join(ROOT, "bench", "world_accuracy.py"), "--parts", "gate",
+         "--sequences", "2", "--orbit", "10", "--first-sequence", "7000"],
+        capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]
+    rows = re.findall(r"^\| (sensor|predicted) \| (0\.02|0\.05|0\.1) \| (\d+)% \|", out.stdout,
+                      re.M)
+    assert [r[:2] for r in rows] == [(p, g) for p in ("sensor", "predicted")
+                                     for g in ("0.02", "0.05", "0.1")], out.stdout
+    assert all(0 <= int(r[2]) <= 100 for r in rows)
