@@ -269,6 +269,41 @@ def test_save_calibration_writes_what_camera_info_manager_loads(harness, tmp_pat
     assert values["warning_set_camera_info_refused"] == "1"
 
 
+
+def test_a_binning_drivers_calibration_is_saved_at_its_full_resolution(harness, tmp_path):
+    """A driver that bins a 1280x960 sensor 2x2 sends 640x480 images; REP-104 calibrations are
+    at full resolution, the driver binning on top, so the file and the SetCameraInfo request
+    give 1280x960, K times two and the principal point at P's (a new user's audit: they gave the
+    binned images' 640x480 and f, which the driver would have halved once more)."""
+    path = tmp_path / "cal.yaml"
+    received = []
+    h = harness(parameter_overrides=[Parameter("calibration_file", value=str(path)),
+                                     Parameter("set_camera_info_service",
+                                               value="/driver/set_camera_info")])
+
+    def on_set(request, response):
+        received.append(request.camera_info)
+        response.success = True
+        return response
+    h.tester.create_service(SetCameraInfo, "/driver/set_camera_info", on_set)
+    binned = driver_info(1280, 960, d=(0.0,) * 5, cx=660.5, cy=457.5)
+    binned.binning_x = binned.binning_y = 2
+    send_driver_info(h, binned)
+    assert h.frame(frame_messages(cam(0), T0))
+    focal = h.node.window.current.focal
+    assert spin_until(h.ex, lambda: h.node.set_info_client.service_is_ready(), 10)
+    assert h.trigger("save_calibration").success
+    assert spin_until(h.ex, lambda: len(received) == 1, 10)
+    cal = yaml.safe_load(path.read_text())
+    assert (cal["image_width"], cal["image_height"]) == (1280, 960)
+    assert cal["camera_matrix"]["data"] == pytest.approx(
+        [2 * focal, 0, 660.5, 0, 2 * focal, 457.5, 0, 0, 1], rel=1e-12)
+    sent = received[0]
+    assert (sent.width, sent.height, sent.binning_x, sent.binning_y) == (1280, 960, 0, 0)
+    assert list(sent.p) == pytest.approx(
+        [2 * focal, 0, 660.5, 0, 0, 2 * focal, 457.5, 0, 0, 0, 1, 0], rel=1e-12)
+
+
 def test_save_calibration_refuses_an_uncertain_estimate(harness, tmp_path):
     path = tmp_path / "c.yaml"
     h = harness(parameter_overrides=[Parameter("calibration_file", value=str(path)),

@@ -858,6 +858,31 @@ def test_camera_info_in_binning_and_roi_describe_smaller_images():
         intrinsics(p, both, 640, 480)
 
 
+
+def test_a_calibration_for_the_driver_is_at_its_full_resolution():
+    """What ~/save_calibration stores and sends: the images' CameraInfo taken back through
+    camera_info_in's ROI and binning (K, P and Tx times the binning, the principal point plus
+    the ROI offset, the sensor's size, no binning or ROI); unchanged for a driver that neither
+    bins nor crops, and without camera_info_in."""
+    from fcop_ros.ros.intrinsics import at_full_resolution, camera_info_with, intrinsics
+
+    p = {"principal_point_x": -1.0, "principal_point_y": -1.0}
+    both = _cam_in(1280, 960, cx=639.0, cy=479.0, binning=(2, 2), roi=(320, 240, 640, 480))
+    # The second camera of a stereo pair, 6 cm apart: P[0, 3] = -0.06 fx.
+    both.p = [1200.0, 0.0, 639.0, -72.0, 0.0, 1200.0, 479.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+    info = camera_info_with(300.0, intrinsics(p, both, 320, 240), 320, 240, None)
+    assert (info.k[2], info.k[5], info.p[3]) == (159.5, 119.5, pytest.approx(-18.0))
+    full = at_full_resolution(info, both)
+    assert (full.width, full.height, full.binning_x, full.binning_y) == (1280, 960, 0, 0)
+    assert (full.roi.width, full.roi.height, full.roi.x_offset) == (0, 0, 0)
+    assert list(full.k) == [600.0, 0.0, 639.0, 0.0, 600.0, 479.0, 0.0, 0.0, 1.0]
+    assert list(full.p) == pytest.approx([600.0, 0, 639.0, -36.0, 0, 600.0, 479.0, 0, 0, 0, 1, 0])
+    assert (info.width, info.k[0]) == (320, 300.0)  # the images' own is left as it was
+    plain = _cam_in(640, 480, cx=300.0, cy=250.0)
+    same = camera_info_with(300.0, intrinsics(p, plain, 640, 480), 640, 480, None)
+    assert at_full_resolution(same, plain) is same and at_full_resolution(same, None) is same
+
+
 def test_principal_point_per_axis_from_parameter_then_camera_info_in_then_centre():
     from fcop_ros.ros.intrinsics import intrinsics
 

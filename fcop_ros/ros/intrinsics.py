@@ -6,6 +6,7 @@ R the identity; a stereo camera's baseline (P's Tx / fx) kept. Plain logic on th
 parameters and a CameraInfo message; no rclpy."""
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 from sensor_msgs.msg import CameraInfo
@@ -128,3 +129,25 @@ def camera_info_with(focal: float, intr: Intrinsics, width: int, height: int,
     if intr.tx_per_f:
         info.p[3] = float(focal) * intr.tx_per_f
     return info
+
+
+def at_full_resolution(info: CameraInfo, cam: CameraInfo | None) -> CameraInfo:
+    """``info`` (of the images as they come) as a driver's calibration store takes it: REP-104
+    calibrations are at the sensor's full resolution, the driver applying its binning and ROI
+    on top, so K and P are multiplied by camera_info_in's binning, the principal point moved
+    by its ROI offset, and the size is its full size (no binning, no ROI). ``info`` unchanged
+    without camera_info_in or when its images are the whole sensor, unbinned."""
+    if cam is None or not (cam.width and cam.height):
+        return info
+    x0, y0, b, _, w, h = image_window(cam)
+    if (x0, y0, b, w, h) == (0, 0, 1, cam.width, cam.height):
+        return info
+    full = copy.deepcopy(info)
+    full.width, full.height = int(cam.width), int(cam.height)
+    for m, row in ((full.k, 3), (full.p, 4)):
+        m[0], m[row + 1] = m[0] * b, m[row + 1] * b
+        m[2], m[row + 2] = m[2] * b + x0, m[row + 2] * b + y0
+    full.p[3] *= b
+    full.binning_x = full.binning_y = 0
+    full.roi = type(full.roi)()
+    return full

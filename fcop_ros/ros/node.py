@@ -46,7 +46,8 @@ from .diagnostics import DiagnosticsInput, HealthNews, RateWindow, diagnostic_st
 from .frame_estimate import estimate_frame
 from .frame_outcome import frame_outcome
 from .intake import Intake
-from .intrinsics import IntrinsicsRefused, Refused, camera_info_with, intrinsics, raw_camera
+from .intrinsics import (IntrinsicsRefused, Refused, at_full_resolution, camera_info_with,
+                         intrinsics, raw_camera)
 from .ledger import NodeLedger
 from . import node_parameters
 from .params import (
@@ -632,7 +633,9 @@ class FcopNode(Node):
             return response
         try:
             with self._lock:
-                info = self._camera_info(est.focal, est.width, est.height, None)
+                # A driver stores its calibration at full resolution (REP-104).
+                info = at_full_resolution(
+                    self._camera_info(est.focal, est.width, est.height, None), self._cam_in)
         except IntrinsicsRefused as exc:
             response.message = str(exc)
             return response
