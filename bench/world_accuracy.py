@@ -400,9 +400,18 @@ def tau(presets, frames, first_seed, variant):
               f"{100 * np.sqrt(np.median(t2)):.2f} | {100 * np.mean(t2 > 0):.0f}% |", flush=True)
 
 
+#: run_sequence's rows by its arguments: the window, zoom and gate parts run the same
+#: sequences, and their estimates depend on nothing else once main() has set the globals.
+_SEQUENCE_ROWS = {}
+
+
 def run_sequence(preset, seed, n, variant, zoom=1.0, estimates=None):
     """Per frame (true focal, frame's focal, its std_rel, window's focal, its std_rel,
-    restarted); the frames' estimates are appended to ``estimates`` when it is a list."""
+    restarted); the frames' estimates are appended to ``estimates`` when it is a list (then
+    the sequence is run anew; otherwise rows already run are reused)."""
+    key = (preset, seed, n, variant, zoom)
+    if estimates is None and key in _SEQUENCE_ROWS:
+        return _SEQUENCE_ROWS[key]
     if WORLD:
         preset = replace(WORLD_PRESETS[preset], **WORLD)
     seq = world_frames(preset, seed, n, variant, zoom_frame=n // 2 if zoom != 1.0 else None,
@@ -417,6 +426,7 @@ def run_sequence(preset, seed, n, variant, zoom=1.0, estimates=None):
         rows.append((fr.focal, est.focal, est.std_rel, w.focal, w.std_rel, w.changed))
         if estimates is not None:
             estimates.append(est)
+    _SEQUENCE_ROWS[key] = rows
     return rows
 
 
