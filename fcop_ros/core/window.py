@@ -401,6 +401,8 @@ class FocalWindow:
         rated, y, v, noise = rated
         n_all = len(self._frames)
         support = int(sum(f.support for f in rated))
+        # Taken before the frames far from the median are left out: a newest frame left out
+        # is the very one that may show a zoom.
         newest = (y[-1], v[-1] + rated[-1].prior) if y.size else None
         if y.size < self.options.min_frames or y.size == 0:
             why = (f"{y.size} frames with focal evidence (min_frames "
