@@ -4,12 +4,11 @@ Each frame contributes its estimate y_t = log f_t, its variance v_t = std_rel_t^
 of it that pixel noise makes, n_t = std_rel_noise_t^2 (a new frame draws it anew). The rest,
 v_t - n_t, is the frame's systematic error budget (shape mismatch, unseen depth error, the
 objects' disagreement): it repeats while the same objects are in view, unless the frames show
-otherwise. Not counted in it: the part the prior between-object spread makes
-(``std_rel_prior``, which a frame of one object pays whole): it stands for the disagreement
-other objects would have shown, errors that change as the view of the object changes, so the
-frames' own spread shows them (with it in the budget, 100% of 40 tuning `predicted` windows
-were covered; without, 96%, and 93% of single-object ones: docs/BENCHMARKS.md). The window's
-variance is
+otherwise. The part the prior between-object spread makes (``std_rel_prior``, which a frame of
+one object pays whole) stands for the disagreement other objects would have shown: it counts
+in the budget only where the window has one object, which nothing else contradicts (a lone
+object's error repeated through a tuning orbit: windows erred +3.5% and -5.8% at a stated
+1.4-1.6% with it left out). The window's variance is
 
     V = max(B - Q, 0) + max(S^2, N) / n_eff
 
@@ -18,13 +17,22 @@ budget (the median of v_t - n_t) and Q = S^2 (1 - sqrt(2 / n_eff)) - N the varia
 noise that the spread shows beyond doubt (its one-standard-error lower bound): that much of the
 budget varies from frame to frame and averages out; the rest cannot. Errors that drift slowly
 (lag-one autocorrelation rho) average out over n_eff = n (1 - rho) / (1 + rho) frames, not n.
-A frame without ``std_rel_noise`` counts as all noise. The newest frame's disagreement with
-the estimate beyond its own variance (its prior part included) is added to V: a zoom shows
-first in the newest frame, before enough frames can tell it from an error, and until then the
-window's focal may be the old one (on 48 development zoom sequences of each preset, the window
-covered the truth after 80-96% of `predicted` and 88-95% of `sensor` updates after the zoom
-without this, 86-100% and 93-100% with it; static windows' coverage did not move by more than
-one point).
+A frame without ``std_rel_noise`` counts as all noise. Where two or more objects are each
+in three of the window's frames, their lasting disagreement shows what of V is theirs: V
+beyond the intrinsics' offsets (which all objects share) counts for two objects, as the prior
+does in a frame (:mod:`.combine`), against k - 1 for the variance of the objects' weighted
+mean that their scatter shows (each object's mean over its frames weighted by 1 / noise, its
+squared residual over 1 less its share of the weight). The frames' budget is sized for the
+variance on average; the objects' scatter ranks windows (on 40 tuning `predicted` sequences
+the windows' median std_rel went from 8.1% to 5.7%, and of the updates a max_uncertainty
+of 0.05 lets through, those beyond 5% error from 19.6% to 12.6%: docs/BENCHMARKS.md).
+
+The newest frame's disagreement with the estimate beyond its own variance (its prior part
+included) is added to V: a zoom shows first in the newest frame, before enough frames can tell
+it from an error, and until then the window's focal may be the old one (on 48 development zoom
+sequences of each preset, the window covered the truth after 80-96% of `predicted` and 88-95%
+of `sensor` updates after the zoom without this, 86-100% and 93-100% with it; static windows'
+coverage did not move by more than one point).
 
 The estimate weights every frame by 1 / n_t, the information its pixels carry, as the frame
 weighs its objects (:mod:`.combine`): the systematic budget is sized for the variance on
@@ -150,6 +158,7 @@ class _Frame:
     radii: dict
     unweighed: bool = False  # a focal without std_rel
     intrinsics: IntrinsicsEvidence | None = None
+    objects: dict | None = None  # {instance_id: (log focal, noise variance)}
 
 
 class FocalWindow:
@@ -240,6 +249,7 @@ class FocalWindow:
                 _log_sizes(estimate.object_radii) if ok else {},
                 estimate.focal is not None and not ok,
                 estimate.intrinsics_evidence if ok else None,
+                _object_evidence(estimate.object_focals) if ok else {},
             )
         )
         while len(self._frames) > self.options.max_frames:
@@ -257,11 +267,13 @@ class FocalWindow:
 
     def _rated(self):
         """(the frames with a focal length, their log focal lengths, variances less the prior
-        part and noise variances), the intrinsics' pooled offsets applied."""
+        part, noise variances and the pooled offsets' variance), the intrinsics' pooled
+        offsets applied."""
         rated = [f for f in self._frames if f.logf is not None]
         y = np.array([f.logf for f in rated])
         v = np.array([f.var - f.prior for f in rated])
         noise = np.array([f.noise for f in rated])
+        common = np.zeros(y.size)
         # The intrinsics' offsets, told by all frames together (see the module docstring):
         # each frame's focal length moves from its own offsets to the pooled ones, and its
         # variance of the offsets becomes the pooled offsets'.
@@ -277,14 +289,15 @@ class FocalWindow:
             own_cov = np.array([e.covariance for e in evidence])
             y[at] += np.einsum("ni,ni->n", g, own - delta)
             v[at] = np.maximum(v[at] + np.einsum("ni,nij,nj->n", g, cov - own_cov, g), noise[at])
-        return rated, y, v, noise
+            common[at] = np.minimum(np.einsum("ni,ij,nj->n", g, cov, g), v[at] - noise[at])
+        return rated, y, v, noise, common
 
     def _detect_change(self, rated) -> tuple[bool, float | None]:
         """(True, None) with the older frames dropped, or (True, the zoom) with them carried
         through it, when the newer frames moved away from the older and, where the frames carry
         their objects' extents, the image scale moved with them; (False, None) otherwise.
         ``rated``: :meth:`_rated` of the window's frames."""
-        rated, y, v, noise = rated
+        rated, y, v, noise, _ = rated
         k = self.options.change_frames
         n = y.size
         if n < 2 * k:
@@ -392,13 +405,14 @@ class FocalWindow:
                 f.logf += step
                 f.var += se * se
                 f.noise += min(excess, f.var - f.noise - f.prior)
+                f.objects = {i: (y + step, n) for i, (y, n) in f.objects.items()}
             f.extents = {i: v + step for i, v in f.extents.items()}
             f.radii = {i: v + step for i, v in f.radii.items()}
         return float(np.exp(step))
 
     def _estimate(self, rated) -> WindowEstimate:
         """The window's estimate from ``rated``, :meth:`_rated` of its frames."""
-        rated, y, v, noise = rated
+        rated, y, v, noise, common = rated
         n_all = len(self._frames)
         support = int(sum(f.support for f in rated))
         # Taken before the frames far from the median are left out: a newest frame left out
@@ -426,7 +440,12 @@ class FocalWindow:
                 MAD_TO_SIGMA * np.median(np.abs(y - med)), float(np.sqrt(np.median(noise)))
             )
             keep = np.abs(y - med) <= self.options.reject_sigma * spread
-            y, v, noise = y[keep], v[keep], noise[keep]
+            rated = [f for f, k in zip(rated, keep) if k]
+            y, v, noise, common = y[keep], v[keep], noise[keep], common[keep]
+        objects = _object_means(rated)
+        if len(objects[0]) < 2:
+            # One object: nothing shows what the prior between-object spread stands for.
+            v = v + np.array([f.prior for f in rated])
         n = y.size
         budget = float(np.median(v - noise))
         noise_var = n / float(np.sum(1.0 / noise))
@@ -435,6 +454,13 @@ class FocalWindow:
         var = budget + noise_var / n  # too few frames to see what varies
         if n >= 3:
             var = self._spread(y, w, mean, budget, noise_var)
+        k = len(objects[0])
+        if k >= 2:
+            # What the objects' lasting disagreement shows, against the frames' variance beyond
+            # the intrinsics' offsets (which all objects share, so none disagrees by them).
+            shared = min(float(np.median(common)), var)
+            var = shared + (_PRIOR_OBJECTS * (var - shared)
+                            + (k - 1) * _disagreement(*objects)) / (_PRIOR_OBJECTS + k - 1)
         # The newest rated frame's disagreement beyond its own variance: a change not yet
         # detected.
         var += max((newest[0] - mean) ** 2 - newest[1], 0.0)
@@ -452,6 +478,42 @@ class FocalWindow:
         n_eff = max(n * (1.0 - rho) / (1.0 + rho), 1.0)
         varies = max(spread2 * max(1.0 - np.sqrt(2.0 / n_eff), 0.0) - noise_var, 0.0)
         return max(budget - varies, 0.0) + max(spread2, noise_var) / n_eff
+
+
+#: What the frames' variance counts for against the objects' disagreement, in objects (as
+#: ``EstimatorOptions.object_tau_weight`` in a frame).
+_PRIOR_OBJECTS = 2.0
+
+
+def _object_evidence(object_focals: dict) -> dict:
+    """{instance_id: (log focal, noise variance)} of a frame's combined objects with a finite,
+    positive focal length and noise."""
+    return {i: (float(np.log(f)), float(n) ** 2) for i, (f, _, n) in object_focals.items()
+            if np.isfinite(f) and f > 0 and np.isfinite(n) and n > 0}
+
+
+def _object_means(frames) -> tuple[np.ndarray, np.ndarray]:
+    """(log focal, information) per object seen in at least three of ``frames``: its focal
+    lengths' mean over them weighted by their information 1 / noise, and that information's
+    sum."""
+    seen = {}
+    for f in frames:
+        for i, (y, n) in (f.objects or {}).items():
+            seen.setdefault(i, []).append((y, 1.0 / n))
+    tracks = [np.array(t) for t in seen.values() if len(t) >= 3]
+    info = np.array([t[:, 1].sum() for t in tracks])
+    means = np.array([t[:, 0] @ t[:, 1] for t in tracks]) / np.maximum(info, 1e-300)
+    return means, info
+
+
+def _disagreement(means: np.ndarray, info: np.ndarray) -> float:
+    """Variance of the objects' information-weighted mean from their own scatter about it:
+    each object's squared residual stands for its variance, over 1 less its share of the
+    weight (it pulls the mean towards itself)."""
+    total = info.sum()
+    r = means - info @ means / total
+    share = info / total
+    return float(np.sum(info**2 * r**2 / np.maximum(1.0 - share, 1e-12)) / total**2)
 
 
 def _log_sizes(sizes: dict) -> dict:
