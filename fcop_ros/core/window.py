@@ -6,7 +6,8 @@ v_t - n_t, is the frame's systematic error budget (shape mismatch, unseen depth 
 objects' disagreement): it repeats while the same objects are in view, unless the frames show
 otherwise. The part the prior between-object spread makes (``std_rel_prior``, which a frame of
 one object pays whole) stands for the disagreement other objects would have shown: it counts
-in the budget only where the window has one object, which nothing else contradicts (a lone
+in the budget only where fewer than two objects are each in three of the window's kept frames,
+so that no disagreement shows (a lone
 object's error repeated through a tuning orbit: windows erred +3.5% and -5.8% at a stated
 1.4-1.6% with it left out). The window's variance is
 
@@ -18,11 +19,14 @@ noise that the spread shows beyond doubt (its one-standard-error lower bound): t
 budget varies from frame to frame and averages out; the rest cannot. Errors that drift slowly
 (lag-one autocorrelation rho) average out over n_eff = n (1 - rho) / (1 + rho) frames, not n.
 A frame without ``std_rel_noise`` counts as all noise. Where two or more objects are each
-in three of the window's frames, their lasting disagreement shows what of V is theirs: V
-beyond the intrinsics' offsets (which all objects share) counts for two objects, as the prior
+in three of the window's kept frames, their lasting disagreement shows what of V is theirs:
+the lasting part, max(B - Q, 0), beyond the intrinsics' offsets (which all objects share)
+counts for two objects, as the prior
 does in a frame (:mod:`.combine`), against k - 1 for the variance of the objects' weighted
 mean that their scatter shows (each object's mean over its frames weighted by 1 / noise, its
-squared residual over 1 less its share of the weight). The frames' budget is sized for the
+squared residual over 1 less its share of the weight). The part that renews, max(S^2, N) /
+n_eff, stays whole: a frame's objects may share an error drawn anew in every frame, which their
+disagreement cannot show. The frames' budget is sized for the
 variance on average; the objects' scatter ranks windows (on 40 tuning `predicted` sequences
 the windows' median std_rel went from 8.1% to 5.7%, and of the updates a max_uncertainty
 of 0.05 lets through, those beyond 5% error from 19.6% to 12.6%: docs/BENCHMARKS.md).
@@ -394,10 +398,10 @@ class FocalWindow:
         return True, None
 
     def _carry(self, first: _Frame, step: float, se: float, excess: float) -> float:
-        """Keep the frames before ``first`` as if seen after the zoom: their focal lengths and
-        image sizes moved by ``step`` (log), their variance by its variance ``se`` squared, and
-        ``excess`` of their systematic budget (what it exceeds the newer frames' by) counted as
-        noise (see the module docstring). Returns the zoom, a ratio."""
+        """Keep the frames before ``first`` as if seen after the zoom: their focal lengths, their
+        objects' and their image sizes moved by ``step`` (log), their variance by its variance
+        ``se`` squared, and ``excess`` of their systematic budget (what it exceeds the newer
+        frames' by) counted as noise (see the module docstring). Returns the zoom, a ratio."""
         for f in self._frames:
             if f is first:
                 break
@@ -440,27 +444,31 @@ class FocalWindow:
                 MAD_TO_SIGMA * np.median(np.abs(y - med)), float(np.sqrt(np.median(noise)))
             )
             keep = np.abs(y - med) <= self.options.reject_sigma * spread
-            rated = [f for f, k in zip(rated, keep) if k]
+            rated = [f for f, kept in zip(rated, keep) if kept]
             y, v, noise, common = y[keep], v[keep], noise[keep], common[keep]
-        objects = _object_means(rated)
-        if len(objects[0]) < 2:
-            # One object: nothing shows what the prior between-object spread stands for.
-            v = v + np.array([f.prior for f in rated])
         n = y.size
+        objects = _object_means(rated)
+        k = objects[0].size
+        if k < 2:
+            # Fewer than two objects to disagree: nothing shows what the prior between-object
+            # spread stands for.
+            v = v + np.array([f.prior for f in rated])
         budget = float(np.median(v - noise))
         noise_var = n / float(np.sum(1.0 / noise))
         w = 1.0 / noise
         mean = float(np.sum(w * y) / w.sum())
-        var = budget + noise_var / n  # too few frames to see what varies
+        lasting, renewed = budget, noise_var / n  # too few frames to see what varies
         if n >= 3:
-            var = self._spread(y, w, mean, budget, noise_var)
-        k = len(objects[0])
+            lasting, renewed = self._spread(y, w, mean, budget, noise_var)
         if k >= 2:
-            # What the objects' lasting disagreement shows, against the frames' variance beyond
-            # the intrinsics' offsets (which all objects share, so none disagrees by them).
-            shared = min(float(np.median(common)), var)
-            var = shared + (_PRIOR_OBJECTS * (var - shared)
-                            + (k - 1) * _disagreement(*objects)) / (_PRIOR_OBJECTS + k - 1)
+            # What the objects' lasting disagreement shows, in place of the lasting budget
+            # beyond the intrinsics' offsets (which all objects share, so none disagrees by
+            # them). Errors that renew from frame to frame stay: a frame's objects may share
+            # them.
+            shared = min(float(np.median(common)), lasting)
+            lasting = shared + (_PRIOR_OBJECTS * (lasting - shared)
+                                + (k - 1) * _disagreement(*objects)) / (_PRIOR_OBJECTS + k - 1)
+        var = lasting + renewed
         # The newest rated frame's disagreement beyond its own variance: a change not yet
         # detected.
         var += max((newest[0] - mean) ** 2 - newest[1], 0.0)
@@ -468,16 +476,16 @@ class FocalWindow:
 
     @staticmethod
     def _spread(y, w, mean, budget, noise_var):
-        """Variance of the weighted mean of frames y with weights w about ``mean``: the budget
-        less what the spread shows to vary, plus the spread over the effective frames (see
-        the module docstring)."""
+        """Variance of the weighted mean of frames y with weights w about ``mean``, as (what
+        lasts: the budget less what the spread shows to vary, what renews: the spread over
+        the effective frames; see the module docstring)."""
         n = y.size
         r = y - mean
         spread2 = float(np.sum(w * r * r) / (n - 1)) * n / float(w.sum())
         rho = _lag_one(r)
         n_eff = max(n * (1.0 - rho) / (1.0 + rho), 1.0)
         varies = max(spread2 * max(1.0 - np.sqrt(2.0 / n_eff), 0.0) - noise_var, 0.0)
-        return max(budget - varies, 0.0) + max(spread2, noise_var) / n_eff
+        return max(budget - varies, 0.0), max(spread2, noise_var) / n_eff
 
 
 #: What the frames' variance counts for against the objects' disagreement, in objects (as
@@ -488,8 +496,14 @@ _PRIOR_OBJECTS = 2.0
 def _object_evidence(object_focals: dict) -> dict:
     """{instance_id: (log focal, noise variance)} of a frame's combined objects with a finite,
     positive focal length and noise."""
-    return {i: (float(np.log(f)), float(n) ** 2) for i, (f, _, n) in object_focals.items()
-            if np.isfinite(f) and f > 0 and np.isfinite(n) and n > 0}
+    out = {}
+    for i, (f, _, n) in object_focals.items():
+        with np.errstate(over="ignore", invalid="ignore"):
+            var = np.float64(n) ** 2 if is_number(n) else np.nan
+        # A noise below 1e-12 is none a fit gives; its information would overflow.
+        if is_number(f) and np.isfinite(f) and f > 0 and n > 0 and 1e-24 <= var < np.inf:
+            out[i] = (float(np.log(f)), float(var))
+    return out
 
 
 def _object_means(frames) -> tuple[np.ndarray, np.ndarray]:
@@ -509,11 +523,11 @@ def _object_means(frames) -> tuple[np.ndarray, np.ndarray]:
 def _disagreement(means: np.ndarray, info: np.ndarray) -> float:
     """Variance of the objects' information-weighted mean from their own scatter about it:
     each object's squared residual stands for its variance, over 1 less its share of the
-    weight (it pulls the mean towards itself)."""
-    total = info.sum()
-    r = means - info @ means / total
-    share = info / total
-    return float(np.sum(info**2 * r**2 / np.maximum(1.0 - share, 1e-12)) / total**2)
+    weight (it pulls the mean towards itself). An object that carries nearly all the weight
+    shows little of its own error: the frames' budget, mixed in, speaks for it."""
+    share = info / info.sum()
+    r = means - share @ means
+    return float(np.sum(share**2 * r**2 / np.maximum(1.0 - share, 1e-12)))
 
 
 def _log_sizes(sizes: dict) -> dict:
