@@ -153,6 +153,25 @@ def test_objects_do_not_discount_an_error_their_frame_shares_anew():
         np.mean(cover), np.median(std))
 
 
+def test_object_evidence_without_a_usable_focal_or_noise_is_left_out():
+    """Per-object entries whose noise is None, text, negative, zero, below 1e-12 or huge, or
+    whose focal is None, text or not positive, are left out of the objects' disagreement: the
+    window says what it says without them, and neither raises nor answers NaN."""
+    good = {1: (600.0, 0.03, 0.01), 2: (630.0, 0.03, 0.01)}
+    bad = {3: (610.0, 0.03, None), 4: (610.0, 0.03, "0.01"), 5: (610.0, 0.03, -0.01),
+           6: (610.0, 0.03, 0.0), 7: (610.0, 0.03, 1e-80), 8: (610.0, 0.03, 1e200),
+           9: (None, 0.03, 0.01), 10: ("610", 0.03, 0.01), 11: (-610.0, 0.03, 0.01)}
+    results = []
+    for objects in (good, {**good, **bad}):
+        w = FocalWindow(WindowOptions(max_frames=30))
+        for t in range(6):
+            e = estimate(615.0 + t, 0.03, std_rel_noise=0.007)
+            e.object_focals = dict(objects)
+            r = w.add(e, t / 30)
+        results.append((r.focal, r.std_rel))
+    assert np.isfinite(results[1][1]) and results[1] == results[0]
+
+
 def test_weights_by_uncertainty():
     w = FocalWindow()
     w.add(estimate(600.0, 0.01), 0.0)

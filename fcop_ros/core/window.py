@@ -499,9 +499,9 @@ def _object_evidence(object_focals: dict) -> dict:
     out = {}
     for i, (f, _, n) in object_focals.items():
         with np.errstate(over="ignore", invalid="ignore"):
-            var = np.float64(n) ** 2 if is_number(n) else np.nan
+            var = np.float64(n) ** 2 if is_number(n) and n > 0 else np.nan
         # A noise below 1e-12 is none a fit gives; its information would overflow.
-        if is_number(f) and np.isfinite(f) and f > 0 and n > 0 and 1e-24 <= var < np.inf:
+        if is_number(f) and np.isfinite(f) and f > 0 and 1e-24 <= var < np.inf:
             out[i] = (float(np.log(f)), float(var))
     return out
 
