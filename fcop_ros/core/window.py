@@ -5,11 +5,10 @@ of it that pixel noise makes, n_t = std_rel_noise_t^2 (a new frame draws it anew
 v_t - n_t, is the frame's systematic error budget (shape mismatch, unseen depth error, the
 objects' disagreement): it repeats while the same objects are in view, unless the frames show
 otherwise. The part the prior between-object spread makes (``std_rel_prior``, which a frame of
-one object pays whole) stands for the disagreement other objects would have shown: it counts
-in the budget only where fewer than two objects are each in three of the window's kept frames,
-so that no disagreement shows (a lone
-object's error repeated through a tuning orbit: windows erred +3.5% and -5.8% at a stated
-1.4-1.6% with it left out). The window's variance is
+one object pays whole) stands for the disagreement other objects would have shown: it counts in
+the budget only where fewer than two objects are each in three of the window's kept frames, so
+that no disagreement shows (a lone object's error repeated through a tuning orbit: windows
+erred +3.5% and -5.8% at a stated 1.4-1.6% with it left out). The window's variance is
 
     V = max(B - Q, 0) + max(S^2, N) / n_eff
 
@@ -18,18 +17,18 @@ budget (the median of v_t - n_t) and Q = S^2 (1 - sqrt(2 / n_eff)) - N the varia
 noise that the spread shows beyond doubt (its one-standard-error lower bound): that much of the
 budget varies from frame to frame and averages out; the rest cannot. Errors that drift slowly
 (lag-one autocorrelation rho) average out over n_eff = n (1 - rho) / (1 + rho) frames, not n.
-A frame without ``std_rel_noise`` counts as all noise. Where two or more objects are each
-in three of the window's kept frames, their lasting disagreement shows what of V is theirs:
-the lasting part, max(B - Q, 0), beyond the intrinsics' offsets (which all objects share)
-counts for two objects, as the prior
-does in a frame (:mod:`.combine`), against k - 1 for the variance of the objects' weighted
-mean that their scatter shows (each object's mean over its frames weighted by 1 / noise, its
-squared residual over 1 less its share of the weight). The part that renews, max(S^2, N) /
-n_eff, stays whole: a frame's objects may share an error drawn anew in every frame, which their
-disagreement cannot show. The frames' budget is sized for the
-variance on average; the objects' scatter ranks windows (on 40 tuning `predicted` sequences
-the windows' median std_rel went from 8.1% to 5.7%, and of the updates a max_uncertainty
-of 0.05 lets through, those beyond 5% error from 19.6% to 12.6%: docs/BENCHMARKS.md).
+A frame without ``std_rel_noise`` counts as all noise. Where two or more objects are each in
+three of the window's kept frames, their lasting disagreement shows what of V is theirs: the
+lasting part, max(B - Q, 0), beyond the intrinsics' offsets (which all objects share) counts
+for two objects, as the prior does in a frame (:mod:`.combine`), against k - 1 for the variance
+of the objects' weighted mean that their scatter shows (each object's mean over its frames
+weighted by 1 / noise, its squared residual over 1 less its share of the weight). The part that
+renews, max(S^2, N) / n_eff, stays whole: a frame's objects may share an error drawn anew in
+every frame, which their disagreement cannot show. The frames' budget is sized for the variance
+on average; the objects' scatter ranks windows (on 40 tuning `predicted` sequences the windows'
+median std_rel went from 8.1% to 5.7%, and of the updates a max_uncertainty of 0.05 lets
+through, those beyond 5% error from 19.6% to 12.6%, at 297ab7f; with the renewing part whole,
+6.1% and 13.7%, replayed: docs/BENCHMARKS.md).
 
 The newest frame's disagreement with the estimate beyond its own variance (its prior part
 included) is added to V: a zoom shows first in the newest frame, before enough frames can tell
@@ -112,7 +111,7 @@ from __future__ import annotations
 
 import numbers
 from collections import Counter, deque
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -162,7 +161,7 @@ class _Frame:
     radii: dict
     unweighed: bool = False  # a focal without std_rel
     intrinsics: IntrinsicsEvidence | None = None
-    objects: dict | None = None  # {instance_id: (log focal, noise variance)}
+    objects: dict = field(default_factory=dict)  # {instance_id: (log focal, noise variance)}
 
 
 class FocalWindow:
@@ -512,11 +511,12 @@ def _object_means(frames) -> tuple[np.ndarray, np.ndarray]:
     sum."""
     seen = {}
     for f in frames:
-        for i, (y, n) in (f.objects or {}).items():
+        for i, (y, n) in f.objects.items():
             seen.setdefault(i, []).append((y, 1.0 / n))
     tracks = [np.array(t) for t in seen.values() if len(t) >= 3]
     info = np.array([t[:, 1].sum() for t in tracks])
-    means = np.array([t[:, 0] @ t[:, 1] for t in tracks]) / np.maximum(info, 1e-300)
+    # _object_evidence keeps noise variances of 1e-24 and more: info is finite and > 0.
+    means = np.array([t[:, 0] @ t[:, 1] for t in tracks]) / info
     return means, info
 
 
